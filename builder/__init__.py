@@ -1,0 +1,1 @@
+"""The offline stage: case -> FMU parameters, FMU packaging with pythonfmu, validation."""

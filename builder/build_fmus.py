@@ -1,0 +1,194 @@
+"""Package the three FMUs of a case with pythonfmu, decorate their model descriptions, cache them.
+
+A built FMU is cached under a key hashed from everything it depends on (its script, the model
+sources, the case parameters and data files, the pythonfmu version), so a repeated run reuses it.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import html
+import importlib
+import io
+import json
+import os
+import shutil
+import tempfile
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+import pythonfmu
+
+from pantohil.fmus import fmu_support
+from pantohil.models.case import Case
+from pantohil.models.profile import write_profile_csv
+
+from .system import FMU_NAMES, loop_latency_steps
+
+BUILDER_VERSION = "1"
+FMUS_DIR = Path(fmu_support.__file__).parent
+MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
+SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in FMU_NAMES}
+CLASS_NAMES = {"catenary": "PantohilCatenary", "rig": "PantohilRig", "pantograph": "PantohilPantograph"}
+
+
+def cache_root() -> Path:
+    return Path(os.environ.get("PANTOHIL_CACHE", Path.home() / ".cache" / "pantohil"))
+
+
+def fmu_parameters(case: Case, delay_steps: int) -> dict[str, dict]:
+    """The case as FMU parameter values, by FMU."""
+    cat, pan, rig = case.catenary, case.pantograph, case.rig
+    n = pan.n
+    pad = lambda xs: list(xs) + [0.0] * (3 - len(xs))
+    masses, stiff, damp = pad(pan.masses_kg), pad(pan.stiffnesses_N_m), pad(pan.dampings_Ns_m)
+    return {
+        "catenary": {
+            "span_length": case.span_m, "speed": case.speed_m_s, "time_step": case.dt_s,
+            "samples_per_span": case.samples_per_span, "tension": cat.tension_N, "density": cat.density_kg_m,
+            "support_stiffness": cat.support_stiffness_N_m2, "alpha": cat.alpha_1_s, "beta": cat.beta_s,
+            "max_frequency": case.values["hil"]["max_frequency_hz"],
+            "update_strategy": ("step", "span").index(case.hil_update), "relaxation": case.relaxation,
+            "ramp_steps": case.ramp_steps, "delay_steps": delay_steps,
+        },
+        "pantograph": {
+            "model": 1 if pan.model == "rigid_mass" else 0, "n_masses": n,
+            **{f"mass_{i + 1}": masses[i] for i in range(3)},
+            **{f"stiffness_{i + 1}": stiff[i] for i in range(3)},
+            **{f"damping_{i + 1}": damp[i] for i in range(3)},
+            "contact_stiffness": pan.contact_stiffness_N_m, "uplift_force": pan.uplift_force_N,
+            "reference_height": case.reference_height_m(), "gravity": pan.gravity_m_s2, "time_step": case.dt_s,
+        },
+        "rig": {
+            "delay_steps": rig.delay_steps, "comm_decimation": rig.comm_decimation,
+            "servo_bandwidth": rig.servo_bandwidth_hz, "servo_damping": rig.servo_damping,
+            "loadcell_cutoff": rig.loadcell_cutoff_hz, "force_offset": rig.force_offset_N,
+            "noise_std": rig.noise_std_N, "noise_seed": rig.noise_seed, "time_step": case.dt_s,
+        },
+    }
+
+
+def default_delay_steps(case: Case) -> int:
+    """D for the standard topology: its loop latency plus the rig's (Paper D sec. 3.4)."""
+    return case.delay_steps(loop_latency_steps())
+
+
+def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
+    """Write the project files an FMU carries in resources/: the model package and the case data."""
+    pkg = stage / "pantohil"
+    shutil.copytree(MODELS_DIR, pkg / "models", ignore=shutil.ignore_patterns("__pycache__", "*.toml", "cases"))
+    (pkg / "fmus").mkdir()
+    for f in ("__init__.py", "fmu_support.py"):
+        shutil.copy2(FMUS_DIR / f, pkg / "fmus" / f)
+    files = [pkg]
+    (stage / fmu_support.PARAMETERS_FILE).write_text(json.dumps(params, indent=1, sort_keys=True))
+    files.append(stage / fmu_support.PARAMETERS_FILE)
+    if name == "catenary":
+        write_profile_csv(stage / "profile.csv", case.profile)
+        files.append(stage / "profile.csv")
+    return files
+
+
+def _digest(name: str, files: list[Path]) -> str:
+    h = hashlib.sha256()
+    h.update(f"{BUILDER_VERSION} {pythonfmu.__version__} {name}".encode())
+    h.update(SCRIPTS[name].read_bytes())
+    for root in files:
+        paths = sorted(p for p in ([root] if root.is_file() else root.rglob("*")) if p.is_file())
+        for p in paths:
+            h.update(p.name.encode())
+            h.update(p.read_bytes())
+    return h.hexdigest()[:20]
+
+
+def _variables(name: str):
+    module = importlib.import_module(f"pantohil.fmus.pantohil_{name}")
+    return module.VARIABLES
+
+
+def decorate_model_description(xml_bytes: bytes, variables) -> bytes:
+    """Add unit definitions, units, ranges and descriptions to pythonfmu's modelDescription.xml."""
+    root = ET.fromstring(xml_bytes)
+    by_name = {v.name: v for v in variables}
+    used = sorted({v.unit for v in variables if v.kind == "real"})
+    units = ET.Element("UnitDefinitions")
+    for u in used:
+        unit = ET.SubElement(units, "Unit", name=u)
+        ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in fmu_support.UNITS[u].items()})
+    cosim = root.find("CoSimulation")
+    root.insert(list(root).index(cosim) + 1, units)
+    for sv in root.iter("ScalarVariable"):
+        var = by_name[sv.get("name")]
+        typ = sv[0]
+        if typ.tag in ("Real", "Integer"):
+            if typ.tag == "Real":
+                typ.set("unit", var.unit)
+            if var.min is not None:
+                typ.set("min", repr(var.min) if typ.tag == "Real" else str(int(var.min)))
+            if var.max is not None:
+                typ.set("max", repr(var.max) if typ.tag == "Real" else str(int(var.max)))
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _documentation(name: str, variables, description: str) -> str:
+    rows = "".join(f"<tr><td>{html.escape(v.name)}</td><td>{v.causality}</td><td>{html.escape(v.unit)}</td>"
+                   f"<td>{html.escape(v.description)}</td></tr>" for v in variables)
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>pantohil {name}</title></head><body>"
+            f"<h1>pantohil {name} FMU</h1><p>{html.escape(description)}</p>"
+            "<p>FMI 2.0 co-simulation, built with pythonfmu: the host needs Python with numpy and scipy. "
+            "Case data are in resources/parameters.json.</p>"
+            f"<table border='1'><tr><th>variable</th><th>causality</th><th>unit</th><th>description</th></tr>{rows}"
+            "</table></body></html>")
+
+
+def _rewrite_zip(path: Path, replace: dict[str, bytes]) -> None:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(path) as src, zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as dst:
+        for item in src.infolist():
+            if item.filename not in replace:
+                dst.writestr(item, src.read(item.filename))
+        for arcname, data in replace.items():
+            dst.writestr(arcname, data)
+    path.write_bytes(buf.getvalue())
+
+
+def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path, bool]:
+    """Build (or fetch from the cache) one FMU and copy it to dest_dir. Returns (path, cached)."""
+    with tempfile.TemporaryDirectory(prefix=f"pantohil_{name}_") as tmp:
+        stage = Path(tmp) / "stage"
+        stage.mkdir()
+        files = _stage(name, params, case, stage)
+        key = _digest(name, files)
+        cached = cache_root() / "fmus" / key / f"{CLASS_NAMES[name]}.fmu"
+        hit = cached.exists()
+        if not hit:
+            variables = _variables(name)
+            doc = Path(tmp) / "doc"
+            doc.mkdir()
+            module = importlib.import_module(f"pantohil.fmus.pantohil_{name}")
+            description = getattr(module, CLASS_NAMES[name]).description
+            (doc / "index.html").write_text(_documentation(name, variables, description))
+            out = Path(tmp) / "out"
+            with contextlib.redirect_stdout(io.StringIO()):
+                fmu = pythonfmu.FmuBuilder.build_FMU(SCRIPTS[name], dest=out, project_files=files,
+                                                     documentation_folder=doc)
+            with zipfile.ZipFile(fmu) as z:
+                xml = z.read("modelDescription.xml")
+            _rewrite_zip(fmu, {"modelDescription.xml": decorate_model_description(xml, variables)})
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            part = cached.with_suffix(".fmu.part")
+            shutil.copy2(fmu, part)
+            os.replace(part, cached)  # atomic: no half-written cache entry
+    dest_dir.mkdir(parents=True, exist_ok=True)
+    target = dest_dir / f"{name}.fmu"
+    shutil.copy2(cached, target)
+    return target, hit
+
+
+def build_case_fmus(case: Case, dest_dir: Path, delay_steps: int | None = None) -> dict[str, Path]:
+    """The three FMUs of a case in dest_dir, with the case's values as their start values."""
+    d = default_delay_steps(case) if delay_steps is None else delay_steps
+    params = fmu_parameters(case, d)
+    return {name: build_fmu(name, params[name], case, Path(dest_dir))[0] for name in FMU_NAMES}

@@ -1,0 +1,32 @@
+"""The HIL system's topology: which FMU output feeds which input, and the loop latency it implies.
+
+Under Jacobi stepping (fmpy master here, libcosim) every connection delays a signal by one step, so
+a loop of C connections through the catenary makes the height reach the pantograph C steps after
+the force it answers was measured there: the catenary's delay advance must include C (Paper D sec. 3.4).
+"""
+from __future__ import annotations
+
+FMU_NAMES = ("catenary", "rig", "pantograph")
+
+CONNECTIONS = (
+    ("catenary", "height_command", "rig", "height_command"),
+    ("rig", "actuator_height", "pantograph", "height"),
+    ("pantograph", "contact_force", "rig", "true_force"),
+    ("rig", "measured_force", "catenary", "contact_force"),
+)
+
+
+def loop_latency_steps(connections=CONNECTIONS, start: str = "catenary") -> int:
+    """Connections on the cycle that leaves and returns to `start` (each is one step of latency)."""
+    # the rig appears twice on the cycle (height path, force path): follow edges, not nodes
+    edges = list(connections)
+    path, node, used = 0, start, set()
+    while True:
+        nxt = next((i for i, e in enumerate(edges) if e[0] == node and i not in used), None)
+        if nxt is None:
+            raise ValueError(f"no loop through {start!r} in the connections")
+        used.add(nxt)
+        path += 1
+        node = edges[nxt][2]
+        if node == start:
+            return path

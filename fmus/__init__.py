@@ -1,0 +1,1 @@
+"""Thin pythonfmu wrappers around pantohil.models: one script per FMU, each with a unique name."""

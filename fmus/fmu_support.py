@@ -1,0 +1,62 @@
+"""Declarative FMU variables: one table per FMU gives names, units, descriptions and ranges; the
+same table registers the variables with pythonfmu and lets the builder decorate modelDescription.xml.
+
+Case values reach the FMU through `resources/parameters.json`, read when the slave is created, so the
+FMU alone (in any master) reproduces the case; a master may still set parameters before initialising.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real
+
+PARAMETERS_FILE = "parameters.json"
+
+# SI base-unit exponents of every unit used by the FMUs (FMI 2.0 <BaseUnit>).
+UNITS = {
+    "m": {"m": 1}, "s": {"s": 1}, "kg": {"kg": 1}, "N": {"kg": 1, "m": 1, "s": -2},
+    "m/s": {"m": 1, "s": -1}, "Hz": {"s": -1}, "1/s": {"s": -1}, "kg/m": {"kg": 1, "m": -1},
+    "N/m": {"kg": 1, "s": -2}, "N/m2": {"kg": 1, "m": -1, "s": -2}, "N.s/m": {"kg": 1, "s": -1},
+    "m/s2": {"m": 1, "s": -2}, "1": {},
+}
+
+
+@dataclass(frozen=True)
+class Var:
+    name: str
+    kind: str  # "real" | "integer" | "boolean"
+    causality: str  # "parameter" | "input" | "output"
+    unit: str
+    description: str
+    start: float | int | bool = 0
+    min: float | None = None
+    max: float | None = None
+
+
+def load_parameters(resources: str | None) -> dict:
+    if not resources:
+        return {}
+    path = Path(resources) / PARAMETERS_FILE
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def register_all(slave, variables: list[Var]) -> None:
+    """Set each variable's attribute (case value or start) and register it with pythonfmu."""
+    given = load_parameters(slave.resources)
+    for var in variables:
+        value = given.get(var.name, var.start) if var.causality == "parameter" else var.start
+        setattr(slave, var.name, {"real": float, "integer": int, "boolean": bool}[var.kind](value))
+        causality = getattr(Fmi2Causality, var.causality)
+        desc = f"{var.description} [{var.unit}]" if var.unit != "1" else var.description
+        if var.causality == "parameter":
+            kw = dict(causality=causality, variability=Fmi2Variability.fixed)
+        elif var.causality == "input":
+            kw = dict(causality=causality,
+                      variability=Fmi2Variability.continuous if var.kind == "real" else Fmi2Variability.discrete)
+        else:
+            kw = dict(causality=causality, initial=Fmi2Initial.exact,
+                      variability=Fmi2Variability.continuous if var.kind == "real" else Fmi2Variability.discrete)
+        cls = {"real": Real, "integer": Integer, "boolean": Boolean}[var.kind]
+        slave.register_variable(cls(var.name, description=desc, **kw), nested=False)

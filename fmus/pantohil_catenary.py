@@ -1,0 +1,71 @@
+"""Periodic catenary FMU (ASM2): receives the measured contact force, runs the HIL iteration and
+commands the contact-point height, advanced by the delay D (Paper B sec. 3, Paper D sec. 3)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from pythonfmu import Fmi2Slave
+
+from pantohil.fmus.fmu_support import Var, register_all
+from pantohil.models.asm import AsmParameters
+from pantohil.models.hil import UPDATES, HilSettings, PeriodicHil
+from pantohil.models.profile import read_profile_csv
+from pantohil.models.receptance import asm_operator, harmonic_count, reduce_harmonics
+
+PROFILE_FILE = "profile.csv"
+
+VARIABLES = [
+    Var("span_length", "real", "parameter", "m", "Span length L", 65.0, 1.0, 1000.0),
+    Var("speed", "real", "parameter", "m/s", "Pantograph speed V", 69.44444444444444, 0.0, 200.0),
+    Var("time_step", "real", "parameter", "s", "Sampling time dt; a span holds samples_per_span samples", 0.001, 1e-5, 0.1),
+    Var("samples_per_span", "integer", "parameter", "1", "Samples per span N = L / (V dt)", 936, 2),
+    Var("tension", "real", "parameter", "N", "String tension T", 31500.0, 0.0),
+    Var("density", "real", "parameter", "kg/m", "String linear density mu", 1.4735, 0.0),
+    Var("support_stiffness", "real", "parameter", "N/m2", "Visco-elastic support stiffness kbar", 51.15, 0.0),
+    Var("alpha", "real", "parameter", "1/s", "Rayleigh (Kelvin-Voigt) alpha", 0.0125, 0.0),
+    Var("beta", "real", "parameter", "s", "Rayleigh (Kelvin-Voigt) beta", 1e-4, 0.0),
+    Var("max_frequency", "real", "parameter", "Hz", "Highest harmonic kept in the height f_max", 25.0, 0.0),
+    Var("update_strategy", "integer", "parameter", "1", "0: step-by-step (Paper D eq. 2), 1: span-by-span (eq. 3)", 0, 0, 1),
+    Var("relaxation", "real", "parameter", "1", "Relaxation mu_c (Paper D eq. 10)", 0.1, 0.0, 1.0),
+    Var("ramp_steps", "integer", "parameter", "1", "Initial ramp N_r in steps (0: none)", 0, 0),
+    Var("delay_steps", "integer", "parameter", "1", "Delay advance D in steps: the loop latency to compensate", 1, 0),
+    Var("contact_force", "real", "input", "N", "Measured contact force (pushing the wire up is positive)", 0.0),
+    Var("height_command", "real", "output", "m", "Contact-point height commanded D samples ahead", 0.0),
+    Var("sample_index", "integer", "output", "1", "Label n of the force just received, 0..N-1 in the span", 0),
+    Var("span_index", "integer", "output", "1", "Virtual span (block) of the force just received", 0),
+    Var("height_at_sample", "real", "output", "m", "Converging wire height at sample_index", 0.0),
+    Var("profile_at_sample", "real", "output", "m", "Static wire height z0 (unfiltered) at sample_index", 0.0),
+    Var("harmonics", "integer", "output", "1", "Harmonics kept N_h (0..N_h-1)", 0),
+]
+
+
+class PantohilCatenary(Fmi2Slave):
+    author = "pantohil"
+    description = ("Periodic catenary (ASM2 analytical string, Gil et al. Papers A-B) for steady-state HIL "
+                   "pantograph tests: valid for the steady state of equal spans only.")
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        register_all(self, VARIABLES)
+        self._hil = None
+
+    def exit_initialization_mode(self):
+        n = int(self.samples_per_span)
+        cat = AsmParameters(self.tension, self.density, self.support_stiffness, self.alpha, self.beta)
+        self.harmonics = harmonic_count(self.max_frequency, n, self.time_step)
+        x = np.arange(n) * self.speed * self.time_step
+        self._z0 = read_profile_csv(Path(self.resources) / PROFILE_FILE, self.span_length).heights(x)
+        op = asm_operator(cat, self.speed, n, self.time_step, self.harmonics)
+        settings = HilSettings(UPDATES[self.update_strategy], self.relaxation, self.delay_steps, self.ramp_steps)
+        self._hil = PeriodicHil(op, reduce_harmonics(self._z0, self.harmonics), settings)
+        self.height_command = 0.0 if self.ramp_steps > 0 else self._hil.current_height(self.delay_steps % n)
+
+    def do_step(self, current_time, step_size):
+        hil = self._hil
+        label, span = hil.sample, hil.span
+        self.height_command = hil.step(self.contact_force)
+        self.sample_index, self.span_index = label, span
+        self.height_at_sample = hil.current_height(label)
+        self.profile_at_sample = float(self._z0[label])
+        return True

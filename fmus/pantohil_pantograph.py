@@ -1,0 +1,55 @@
+"""Pantograph FMU: a lumped chain of 1-3 masses with penalty contact and contact loss, HHT-integrated,
+or a rigid mass on the actuator (Paper A sec. 2, Paper B sec. 5.1)."""
+from __future__ import annotations
+
+from pythonfmu import Fmi2Slave
+
+from pantohil.fmus.fmu_support import Var, register_all
+from pantohil.models.pantograph import PantographParameters, make_pantograph
+
+VARIABLES = [
+    Var("model", "integer", "parameter", "1", "0: mass chain with penalty contact, 1: rigid mass on the actuator", 0, 0, 1),
+    Var("n_masses", "integer", "parameter", "1", "Masses in the chain, head first", 3, 1, 3),
+    *[Var(f"mass_{i}", "real", "parameter", "kg", f"Mass {i}", m, 0.0) for i, m in zip((1, 2, 3), (6.6, 5.8, 5.8))],
+    *[Var(f"stiffness_{i}", "real", "parameter", "N/m", f"Element {i} stiffness (mass {i} to mass {i + 1} or ground)", k, 0.0)
+      for i, k in zip((1, 2, 3), (7000.0, 14100.0, 80.0))],
+    *[Var(f"damping_{i}", "real", "parameter", "N.s/m", f"Element {i} damping", c, 0.0)
+      for i, c in zip((1, 2, 3), (0.0, 0.0, 70.0))],
+    Var("contact_stiffness", "real", "parameter", "N/m", "Penalty contact stiffness k_c", 50000.0, 0.0),
+    Var("uplift_force", "real", "parameter", "N", "Static uplift force on the last mass", 130.0),
+    Var("reference_height", "real", "parameter", "m", "Wire height at which the static contact force equals the uplift force", 0.0),
+    Var("gravity", "real", "parameter", "m/s2", "Gravity felt by the rigid mass (load cell not tared)", 0.0, 0.0),
+    Var("time_step", "real", "parameter", "s", "Integration step dt (equal to the communication step)", 0.001, 1e-6),
+    Var("height", "real", "input", "m", "Actuator (contact-point) height at the end of the step", 0.0),
+    Var("contact_force", "real", "output", "N", "Contact force on the wire (load-cell reading without the rig)", 0.0),
+    Var("head_height", "real", "output", "m", "Height of the head (mass 1)", 0.0),
+    Var("in_contact", "boolean", "output", "1", "True while the head touches the wire", True),
+]
+
+
+class PantohilPantograph(Fmi2Slave):
+    author = "pantohil"
+    description = "Lumped pantograph (Paper A Table A.3 chain, HHT alpha=-0.05) with penalty contact and contact loss."
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        register_all(self, VARIABLES)
+        self._model = None
+
+    def exit_initialization_mode(self):
+        n = int(self.n_masses) if self.model == 0 else 1
+        pick = lambda stem: tuple(float(getattr(self, f"{stem}_{i}")) for i in range(1, n + 1))
+        params = PantographParameters(pick("mass"), pick("stiffness"), pick("damping"), self.contact_stiffness,
+                                      self.uplift_force, "rigid_mass" if self.model == 1 else "chain", self.gravity)
+        self._model = make_pantograph(params, self.time_step, self.reference_height)
+        self.contact_force = self._model.settle(self.height)
+        self._publish()
+
+    def _publish(self):
+        self.head_height = self._model.head_height
+        self.in_contact = self.contact_force > 0.0
+
+    def do_step(self, current_time, step_size):
+        self.contact_force = self._model.step(self.height)
+        self._publish()
+        return True

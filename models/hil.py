@@ -1,0 +1,103 @@
+"""The periodic HIL iteration (Paper B sec. 3, Paper C sec. 4, Paper D sec. 3).
+
+Each call to `step` receives the force measured at the current sample of the current virtual span
+(block) and returns the height to command, advanced by `delay_steps` samples so that it is reached
+when the pantograph gets there (Paper D sec. 3.4). Samples are labelled n = 0..N-1 within a block.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+UPDATES = ("step", "span")
+
+
+@dataclass(frozen=True)
+class HilSettings:
+    update: str = "step"  # "step": Paper D eq. (2); "span": Paper D eq. (3)
+    relaxation: float = 0.1  # mu_c, Paper D eq. (9)-(10)
+    delay_steps: int = 1  # D: 1 is the unavoidable one-step loop (Paper D Fig. 4)
+    ramp_steps: int = 0  # N_r, Paper D sec. 3.6
+
+
+class PeriodicHil:
+    """Step-by-step or span-by-span updating of the periodic contact-point height.
+
+    `operator` exposes `column(m)` (response to a unit force at sample m) and `apply(f)`;
+    `z0` is the (frequency-reduced) wire height at the N samples.
+    """
+
+    def __init__(self, operator, z0: np.ndarray, settings: HilSettings):
+        if settings.update not in UPDATES:
+            raise ValueError(f"hil.update must be one of {UPDATES}, got {settings.update!r}")
+        self.op = operator
+        self.z0 = np.asarray(z0, dtype=float)
+        self.n = len(self.z0)
+        self.s = settings
+        self.k = 0  # global step counter
+        self.force_relaxed = np.zeros(self.n)  # r f: the force vector in use (Paper D eq. 9)
+        self.z = self.z0.copy()  # z^k (step) / latest block vector z^b (span)
+        self._z_older = self.z0.copy()  # z^{b-1} while z holds z^b (span)
+        self._block_force = np.zeros(self.n)
+
+    @property
+    def sample(self) -> int:
+        """Label of the sample the next measured force belongs to."""
+        return self.k % self.n
+
+    @property
+    def span(self) -> int:
+        return self.k // self.n
+
+    def current_height(self, label: int) -> float:
+        """The converging estimate of the wire height at a sample (what the pantograph sees there)."""
+        return float(self.z[label])
+
+    def step(self, force: float) -> float:
+        n_bar = self.k % self.n
+        mu = self.s.relaxation
+        if self.s.update == "step":
+            delta = mu * (force - self.force_relaxed[n_bar])  # Paper D eq. (10)
+            self.force_relaxed[n_bar] += delta
+            if delta != 0.0:
+                self.z += delta * self.op.column(n_bar)
+            command = self.z[(n_bar + self.s.delay_steps) % self.n]
+        else:
+            self._block_force[n_bar] = force
+            command = self._span_command(n_bar)
+            if n_bar == self.n - 1:  # block complete: Paper D eq. (A.8)
+                z_new = mu * (self.z0 + self.op.apply(self._block_force)) + (1 - mu) * self.z
+                self.force_relaxed = mu * self._block_force + (1 - mu) * self.force_relaxed
+                self._z_older, self.z = self.z, z_new
+        self.k += 1
+        if self.s.ramp_steps > 0 and self.k < self.s.ramp_steps:
+            command *= self.k / self.s.ramp_steps
+        return float(command)
+
+    def _span_command(self, n_bar: int) -> float:
+        """Linear blend of the two latest block vectors, Paper D eq. (3), with the delay rotation (A.11)."""
+        target = (n_bar + self.s.delay_steps) % self.n
+        w_new = (n_bar + 1) / self.n
+        return (1.0 - w_new) * self._z_older[target] + w_new * self.z[target]
+
+
+class ConvergenceMonitor:
+    """Span-to-span change of the measured force: rms(f^b - f^(b-1)) / std(f^b)."""
+
+    def __init__(self, samples_per_span: int):
+        self.n = samples_per_span
+        self.history: list[dict] = []
+        self._prev = None
+
+    def close_span(self, span: int, force: np.ndarray) -> dict:
+        std = float(np.std(force))
+        if self._prev is None:
+            change = float("inf")
+        else:
+            change = float(np.sqrt(np.mean((force - self._prev) ** 2)) / max(std, 1e-12))
+        self._prev = force.copy()
+        rec = {"span": span, "change": change, "mean_N": float(np.mean(force)), "std_N": std,
+               "max_N": float(np.max(force)), "min_N": float(np.min(force))}
+        self.history.append(rec)
+        return rec

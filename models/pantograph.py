@@ -1,0 +1,222 @@
+"""Lumped pantograph models: an n-mass chain with penalty contact, and a rigid mass on the actuator.
+
+Chain (Paper A Fig. 2, Table A.3): mass 1 is the head; element i joins mass i to mass i+1 and the
+last element joins the last mass to ground. The uplift force acts on the last mass. Heights are
+absolute (z up); the chain is written in displacements u from the reference configuration in which
+the head touches a wire at `reference_height_m` with a contact force equal to the uplift force:
+    M u'' + C u' + K u = -(f - F_up) e1,   f = k_c max(0, y1 - z)
+which is the absolute model with the ground-spring preload eliminated.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+GRAVITY_M_S2 = 9.81
+
+
+@dataclass(frozen=True)
+class PantographParameters:
+    """A chain of 1 to 3 lumped masses (Paper A Table A.3), or a rigid mass (Paper B sec. 5.1)."""
+
+    masses_kg: tuple = (6.6, 5.8, 5.8)
+    stiffnesses_N_m: tuple = (7000.0, 14100.0, 80.0)
+    dampings_Ns_m: tuple = (0.0, 0.0, 70.0)
+    contact_stiffness_N_m: float = 50000.0
+    uplift_force_N: float = 130.0
+    model: str = "chain"  # "chain" or "rigid_mass"
+    gravity_m_s2: float = 0.0  # only the rigid mass feels it (its load cell is not tared)
+
+    @property
+    def n(self) -> int:
+        return len(self.masses_kg)
+
+    def matrices(self):
+        """Mass, damping and stiffness matrices of the chain (Paper A eq. 18's M_p, C_p, K_p)."""
+        n = self.n
+        M = np.diag(np.asarray(self.masses_kg, dtype=float))
+        K = np.zeros((n, n))
+        C = np.zeros((n, n))
+        for i in range(n):
+            k, c = self.stiffnesses_N_m[i], self.dampings_Ns_m[i]
+            K[i, i] += k
+            C[i, i] += c
+            if i + 1 < n:
+                K[i + 1, i + 1] += k
+                C[i + 1, i + 1] += c
+                K[i, i + 1] -= k
+                K[i + 1, i] -= k
+                C[i, i + 1] -= c
+                C[i + 1, i] -= c
+        return M, C, K
+
+    def receptance(self, omega):
+        """Contact-point receptance H_p = 1/k_h + [K - w^2 M + i w C]^-1_(1,1), Paper A eq. (18).
+
+        For the rigid mass: H_p = -1/(m w^2) (no contact spring), defined for w > 0 only.
+        """
+        omega = np.atleast_1d(np.asarray(omega, dtype=float))
+        if self.model == "rigid_mass":
+            with np.errstate(divide="ignore"):
+                return -1.0 / (self.masses_kg[0] * omega**2) + 0j
+        M, C, K = self.matrices()
+        out = np.empty(omega.shape, dtype=complex)
+        for j, w in enumerate(omega):
+            out[j] = np.linalg.inv(K - w**2 * M + 1j * w * C)[0, 0]
+        return out + 1.0 / self.contact_stiffness_N_m
+
+    def contact_frequency_hz(self) -> float:
+        """Natural frequency of the head on its contact spring, sqrt((k1 + k_c)/m1)/(2 pi) (Paper D sec. 4)."""
+        return float(np.sqrt((self.stiffnesses_N_m[0] + self.contact_stiffness_N_m) / self.masses_kg[0]) / (2 * np.pi))
+
+    def static_compliance_m_N(self) -> float:
+        """Head displacement per unit head force at rest, with the contact spring in series."""
+        if self.model == "rigid_mass":
+            return 0.0
+        return float(self.receptance(0.0)[0].real)
+
+
+@dataclass(frozen=True)
+class HhtConstants:
+    """HHT-alpha constants of the thesis (Paper A Appendix A)."""
+
+    alpha: float = -0.05
+    beta: float = 0.2756
+    gamma: float = 0.55
+
+
+@dataclass
+class ChainPantograph:
+    """HHT integration of the chain with unilateral penalty contact (Paper A sec. 2).
+
+    `step(z_next)` advances one time step to t + dt with the wire (actuator) height z_next at the
+    end of the step and returns the contact force there.
+    """
+
+    params: PantographParameters
+    dt: float
+    reference_height_m: float = 0.0
+    hht: HhtConstants = field(default_factory=HhtConstants)
+
+    def __post_init__(self):
+        p = self.params
+        self.M, self.C, self.K = p.matrices()
+        n = p.n
+        self.e1 = np.zeros(n)
+        self.e1[0] = 1.0
+        self.kc = p.contact_stiffness_N_m
+        self.f_up = p.uplift_force_N
+        # head height of the reference configuration: the penalty spring is compressed by F_up/k_c
+        self.head_ref = self.reference_height_m + self.f_up / self.kc
+        self.K_act = self.K + self.kc * np.outer(self.e1, self.e1)
+        # One HHT step is affine in x = [u, v, a, z_next, f_old, 1]: precompute x -> x_new per contact state.
+        self._step_free = self._affine_step(contact=False)
+        self._step_act = self._affine_step(contact=True)
+        self._x = np.zeros(3 * n + 3)
+        self._x[-1] = 1.0
+        self.u = np.zeros(n)
+        self.v = np.zeros(n)
+        self.acc = np.zeros(n)
+        self.force = self.f_up
+        self.z = self.reference_height_m
+
+    def settle(self, z: float) -> float:
+        """Static equilibrium in contact with a wire at height z; returns the contact force."""
+        rhs = -self.kc * (self.head_ref - z) * self.e1
+        u = np.linalg.solve(self.K_act, rhs)
+        if self.head_ref + u[0] - z < 0:  # cannot reach the wire: rest with no contact
+            u = np.linalg.lstsq(self.K, self.f_up * self.e1, rcond=None)[0]
+        self.u, self.v, self.acc = u, np.zeros_like(u), np.zeros_like(u)
+        self.z = z
+        self.force = self.kc * max(0.0, self.head_ref + u[0] - z)
+        return self.force
+
+    @property
+    def head_height(self) -> float:
+        return float(self.head_ref + self.u[0])
+
+    def _affine_step(self, contact: bool) -> np.ndarray:
+        """Matrix P with [u, v, a]_new = P [u, v, a, z_next, f_old, 1] for one HHT step (Hilber-Hughes-Taylor
+        1977; constants of Paper A App. A), with the penalty contact active or not."""
+        a, b, g, dt = self.hht.alpha, self.hht.beta, self.hht.gamma, self.dt
+        n, M, C, K, e1 = self.params.n, self.M, self.C, self.K, self.e1
+        K1 = self.K_act if contact else K
+        S = np.linalg.inv(M + (1 + a) * (g * dt * C + b * dt * dt * K1))
+        I, Z = np.eye(n), np.zeros((n, n))
+        # predictors as maps of [u, v, a]
+        u_pred = np.hstack([I, dt * I, dt * dt * (0.5 - b) * I])
+        v_pred = np.hstack([Z, I, dt * (1 - g) * I])
+        state = np.hstack([I, Z, Z]), np.hstack([Z, I, Z])
+        acc = S @ (a * (C @ state[1] + K @ state[0]) - (1 + a) * (C @ v_pred + K1 @ u_pred))
+        # columns for z_next, f_old and the constant: -alpha F_old + (1+alpha) F_new
+        col_z = S @ ((1 + a) * self.kc * e1) if contact else np.zeros(n)
+        col_f = S @ (a * e1)  # -alpha * (-(f_old - F_up) e1), force part
+        const = S @ (-a * self.f_up * e1 + (1 + a) * (self.f_up - (self.kc * self.head_ref if contact else 0.0)) * e1)
+        A_acc = np.hstack([acc, col_z[:, None], col_f[:, None], const[:, None]])
+        ext = lambda m: np.hstack([m, np.zeros((n, 3))])
+        A_u = ext(u_pred) + b * dt * dt * A_acc
+        A_v = ext(v_pred) + g * dt * A_acc
+        return np.vstack([A_u, A_v, A_acc])
+
+    def step(self, z_next: float) -> float:
+        """One HHT step with unilateral contact: free unless the head would penetrate the wire."""
+        x = self._x
+        n = self.params.n
+        x[:n], x[n:2 * n], x[2 * n:3 * n] = self.u, self.v, self.acc
+        x[-3], x[-2] = z_next, self.force
+        new = self._step_free @ x
+        gap = self.head_ref + new[0] - z_next
+        if gap > 0.0:
+            new = self._step_act @ x
+            gap = self.head_ref + new[0] - z_next
+        self.u, self.v, self.acc = new[:n], new[n:2 * n], new[2 * n:]
+        self.z = z_next
+        self.force = self.kc * gap if gap > 0.0 else 0.0
+        return self.force
+
+
+@dataclass
+class RigidMass:
+    """A mass fixed to the actuator (Paper B sec. 5.1): the load cell reads f = -m (g + z'').
+
+    The acceleration follows the actuator position with the Newmark relations (HHT beta, gamma),
+    a causal, second-order accurate and stable differentiator, so it adds no latency.
+    """
+
+    params: PantographParameters
+    dt: float
+    hht: HhtConstants = field(default_factory=HhtConstants)
+
+    def __post_init__(self):
+        self.m = self.params.masses_kg[0]
+        self.g = self.params.gravity_m_s2
+        self.z = 0.0
+        self.v = 0.0
+        self.acc = 0.0
+        self.force = -self.m * self.g
+
+    def settle(self, z: float) -> float:
+        self.z, self.v, self.acc = z, 0.0, 0.0
+        self.force = -self.m * self.g
+        return self.force
+
+    @property
+    def head_height(self) -> float:
+        return self.z
+
+    def step(self, z_next: float) -> float:
+        b, g, dt = self.hht.beta, self.hht.gamma, self.dt
+        acc_new = (z_next - self.z - dt * self.v - dt * dt * (0.5 - b) * self.acc) / (b * dt * dt)
+        self.v += dt * ((1 - g) * self.acc + g * acc_new)
+        self.acc = acc_new
+        self.z = z_next
+        self.force = -self.m * (self.g + acc_new)
+        return self.force
+
+
+def make_pantograph(params: PantographParameters, dt: float, reference_height_m: float = 0.0):
+    """The time-domain model for a parameter set."""
+    if params.model == "rigid_mass":
+        return RigidMass(params, dt)
+    return ChainPantograph(params, dt, reference_height_m)

@@ -1,0 +1,81 @@
+"""Contact-wire height z0(x) along one span (Paper A sec. 5.1, Paper B sec. 2.2).
+
+Until the finite-element builder provides a form-found profile, z0 is either read from a CSV file
+or generated: the wire hangs in parabolas under its own weight between its fixed points (supports
+and dropper clamps), whose design heights follow an optional pre-sag parabola.
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+GRAVITY_M_S2 = 9.81
+
+
+class ProfileError(ValueError):
+    """A profile that cannot be built or read."""
+
+
+@dataclass(frozen=True)
+class DropperProfile:
+    """Data for a generated profile. Dropper positions are measured from the span's first support."""
+
+    span_m: float
+    dropper_positions_m: tuple
+    wire_mass_kg_m: float
+    wire_tension_N: float
+    presag_m: float = 0.0
+
+    def heights(self, x: np.ndarray) -> np.ndarray:
+        """z0(x) = design height (pre-sag parabola) + sag parabola w (x-a)(x-b)/(2T) between fixed points."""
+        L = self.span_m
+        x = np.mod(np.asarray(x, dtype=float), L)
+        fixed = np.concatenate([[0.0], np.sort(self.dropper_positions_m), [L]])
+        design = -4.0 * self.presag_m * fixed * (L - fixed) / L**2
+        i = np.clip(np.searchsorted(fixed, x, side="right") - 1, 0, len(fixed) - 2)
+        a, b = fixed[i], fixed[i + 1]
+        s = (x - a) / (b - a)
+        chord = design[i] * (1 - s) + design[i + 1] * s
+        w = self.wire_mass_kg_m * GRAVITY_M_S2
+        return chord - w * (x - a) * (b - x) / (2.0 * self.wire_tension_N)
+
+
+@dataclass(frozen=True)
+class TabulatedProfile:
+    """z0 tabulated over one span (x from 0 to span), interpolated linearly and periodically."""
+
+    span_m: float
+    x_m: np.ndarray
+    z_m: np.ndarray
+
+    def heights(self, x: np.ndarray) -> np.ndarray:
+        return np.interp(np.mod(np.asarray(x, dtype=float), self.span_m), self.x_m, self.z_m, period=self.span_m)
+
+
+def read_profile_csv(path: Path, span_m: float) -> TabulatedProfile:
+    """Read `x_m,z0_m` rows; x must increase and lie within [0, span]."""
+    path = Path(path)
+    try:
+        with path.open(newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        x = np.array([float(r["x_m"]) for r in rows])
+        z = np.array([float(r["z0_m"]) for r in rows])
+    except FileNotFoundError:
+        raise ProfileError(f"profile file {path} does not exist") from None
+    except (KeyError, ValueError, TypeError) as exc:
+        raise ProfileError(f"profile file {path}: expected numeric columns x_m,z0_m ({exc})") from None
+    if len(x) < 2 or np.any(np.diff(x) <= 0) or x[0] < 0 or x[-1] > span_m:
+        raise ProfileError(f"profile file {path}: x_m must increase within [0, {span_m}] m")
+    return TabulatedProfile(span_m, x, z)
+
+
+def write_profile_csv(path: Path, profile, n_points: int = 6501) -> None:
+    x = np.linspace(0.0, profile.span_m, n_points)
+    z = profile.heights(x)
+    with Path(path).open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["x_m", "z0_m"])
+        w.writerows((f"{a:.6f}", f"{b:.9e}") for a, b in zip(x, z))

@@ -1,0 +1,116 @@
+"""The `pantohil` command line.
+
+Exit codes: 0 success; 1 a run that did not converge (diverged or reached its span limit);
+2 bad input (one line naming the key); 3 reserved for a lost hardware link.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from datetime import datetime
+from pathlib import Path
+
+from pantohil.models.case import CaseError, load_case
+
+EXIT_BAD_INPUT = 2
+
+
+def _add_case_args(p: argparse.ArgumentParser, optional: bool) -> None:
+    if optional:
+        p.add_argument("case", nargs="?", type=Path, help="case file (TOML); default: the built-in asm_250 case")
+    else:
+        p.add_argument("case", type=Path, help="case file (TOML)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                   help="override a case key, e.g. --set hil.update=span (repeatable)")
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="pantohil", description="HIL pantograph tests against a virtual periodic "
+                                                               "catenary, built from FMI 2.0 co-simulation units.")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="virtual HIL run of a case (FMUs stepped by the fmpy master)")
+    _add_case_args(run, optional=True)
+    run.add_argument("--out", type=Path, help="run folder (default: runs/<case>-<time>)")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    build = sub.add_parser("build", help="build and validate the FMUs of a case")
+    _add_case_args(build, optional=True)
+    build.add_argument("--out", type=Path, required=True, help="folder for the FMUs")
+
+    direct = sub.add_parser("direct", help="closed-form ASM steady state of a case (Paper A)")
+    _add_case_args(direct, optional=True)
+    direct.add_argument("--second-pantograph-at", type=float, metavar="L",
+                        help="spacing of a trailing pantograph [m]: its std and the optimal spacings L_min")
+    direct.add_argument("--max-spacing", type=float, default=200.0, help="longest L_min listed [m]")
+    direct.add_argument("--out", type=Path, help="also write the result as JSON to this file")
+    return ap
+
+
+def _cmd_run(args) -> int:
+    from pantohil.orchestrator.hil_run import run_case
+
+    case = load_case(args.case, args.overrides)
+    out = args.out or Path("runs") / f"{case.name}-{datetime.now():%Y%m%d-%H%M%S}"
+    result = run_case(case, out, progress=not args.quiet)
+    cf = result.get("contact_force", {})
+    print(f"{result['status']}: {result['message']}")
+    if cf:
+        print(f"contact force: mean {cf['mean_N']:.2f} N, std {cf['std_N']:.2f} N, "
+              f"20 Hz std {cf['filtered_20hz']['std_N']:.2f} N; "
+              f"{result['timing']['realtime_factor']:.1f}x real time")
+    print(f"run folder: {out}")
+    return result.exit_code
+
+
+def _cmd_build(args) -> int:
+    from fmpy.validation import validate_fmu
+
+    from pantohil.builder.build_fmus import build_case_fmus
+    from pantohil.orchestrator.hil_run import delay_plan
+
+    case = load_case(args.case, args.overrides)
+    fmus = build_case_fmus(case, args.out, delay_plan(case)["delay_steps"])
+    bad = 0
+    for name, path in fmus.items():
+        problems = validate_fmu(str(path))
+        bad += len(problems)
+        print(f"{path}: {'valid' if not problems else '; '.join(problems)}")
+    return 1 if bad else 0
+
+
+def _cmd_direct(args) -> int:
+    from pantohil.orchestrator.direct import direct_solution
+
+    case = load_case(args.case, args.overrides)
+    if args.second_pantograph_at is not None and args.second_pantograph_at <= 0:
+        raise CaseError(f"--second-pantograph-at: must be > 0 m (got {args.second_pantograph_at:g})")
+    res = direct_solution(case, args.second_pantograph_at, args.max_spacing)
+    s = res["single"]
+    print(f"{case.name}: {res['speed_kmh']:.0f} km/h, {res['harmonics']} harmonics up to {res['max_frequency_hz']:.2f} Hz")
+    print(f"single pantograph: mean {s['mean_N']:.2f} N, std {s['std_N']:.3f} N (harmonics <= 20 Hz: {s['std_20hz_N']:.3f} N)")
+    if "two_pantographs" in res:
+        t = res["two_pantographs"]
+        print(f"two pantographs {t['spacing_m']:g} m apart: leading std {t['leading_std_N']:.3f} N, "
+              f"trailing std {t['trailing_std_N']:.3f} N")
+        for h in t["optimal_spacings_m"]:
+            ls = ", ".join(f"{x:.1f}" for x in h["L_min_m"])
+            print(f"  L_min for harmonic {h['harmonic']} ({h['frequency_hz']:.2f} Hz, |Z| {h['z0_amplitude_m'] * 1e3:.2f} mm): {ls} m")
+    if args.out:
+        args.out.write_text(json.dumps(res, indent=2) + "\n")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct}[args.command]
+    try:
+        return handler(args)
+    except CaseError as exc:
+        print(f"pantohil: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,84 @@
+"""Run-folder outputs: summary.json, steady_span.csv and the plots."""
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def _clean(obj):
+    """JSON-safe: non-finite floats become null."""
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    tmp = path.with_suffix(path.suffix + ".part")
+    tmp.write_text(json.dumps(_clean(data), indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def write_steady_span(path: Path, t: np.ndarray, z0: np.ndarray, z: np.ndarray, f: np.ndarray) -> None:
+    rows = "\n".join(f"{a:.6f},{b:.9e},{c:.9e},{d:.9e}" for a, b, c, d in zip(t, z0, z, f))
+    tmp = path.with_suffix(".csv.part")
+    tmp.write_text("t_s,z0_m,z_m,f_N\n" + rows + "\n")
+    os.replace(tmp, path)
+
+
+def plot_contact_force(path: Path, dt: float, spans: list[np.ndarray], reference: np.ndarray | None,
+                       filtered: np.ndarray | None, title: str) -> None:
+    """Last spans overlaid (Paper B Fig. 11 style), with the closed form where there is one."""
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for i, f in enumerate(spans):
+        ax.plot(np.arange(len(f)) * dt, f, color="0.2", lw=0.8, alpha=0.35 + 0.65 * (i + 1) / len(spans),
+                label=f"HIL, last {len(spans)} spans" if i == len(spans) - 1 else None)
+    if filtered is not None:
+        ax.plot(np.arange(len(filtered)) * dt, filtered, color="tab:blue", lw=1.2, label="last span, 20 Hz low-pass")
+    if reference is not None:
+        ax.plot(np.arange(len(reference)) * dt, reference, "--", color="tab:red", lw=1.2,
+                label="closed form (same harmonics)")
+    ax.set_xlabel("time in span [s]")
+    ax.set_ylabel("contact force [N]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_convergence(path: Path, history: list[dict], tol: float, title: str) -> None:
+    spans = [h["span"] for h in history]
+    change = [h["change"] if math.isfinite(h["change"]) else np.nan for h in history]
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    ax1.semilogy(spans, change, "o-", ms=3)
+    ax1.axhline(tol, color="tab:red", ls="--", lw=1, label=f"tolerance {tol:g}")
+    ax1.set_ylabel("rms span-to-span change / std")
+    ax1.grid(alpha=0.3, which="both")
+    ax1.legend(fontsize=8)
+    ax1.set_title(title)
+    ax2.plot(spans, [h["std_N"] for h in history], "o-", ms=3, label="std")
+    ax2.plot(spans, [h["mean_N"] for h in history], "s-", ms=3, label="mean")
+    ax2.set_xlabel("virtual span")
+    ax2.set_ylabel("contact force [N]")
+    ax2.grid(alpha=0.3)
+    ax2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
