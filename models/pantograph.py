@@ -122,11 +122,11 @@ class ChainPantograph:
         self.z = self.reference_height_m
 
     def settle(self, z: float) -> float:
-        """Static equilibrium in contact with a wire at height z; returns the contact force."""
-        rhs = -self.kc * (self.head_ref - z) * self.e1
+        """Static equilibrium in contact with a wire at height z: K_act u = (F_up - k_c (y1* - z)) e1."""
+        rhs = (self.f_up - self.kc * (self.head_ref - z)) * self.e1
         u = np.linalg.solve(self.K_act, rhs)
         if self.head_ref + u[0] - z < 0:  # cannot reach the wire: rest with no contact
-            u = np.linalg.lstsq(self.K, self.f_up * self.e1, rcond=None)[0]
+            u = np.linalg.lstsq(self.K, self.f_up * self.e1, rcond=None)[0]  # K u = F_up e1 (f = 0)
         self.u, self.v, self.acc = u, np.zeros_like(u), np.zeros_like(u)
         self.z = z
         self.force = self.kc * max(0.0, self.head_ref + u[0] - z)

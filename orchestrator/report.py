@@ -35,7 +35,7 @@ def write_json_atomic(path: Path, data: dict) -> None:
 
 
 def write_steady_span(path: Path, t: np.ndarray, z0: np.ndarray, z: np.ndarray, f: np.ndarray) -> None:
-    rows = "\n".join(f"{a:.6f},{b:.9e},{c:.9e},{d:.9e}" for a, b, c, d in zip(t, z0, z, f))
+    rows = "\n".join(f"{a:.6f},{b:.12e},{c:.12e},{d:.12e}" for a, b, c, d in zip(t, z0, z, f))
     tmp = path.with_suffix(".csv.part")
     tmp.write_text("t_s,z0_m,z_m,f_N\n" + rows + "\n")
     os.replace(tmp, path)

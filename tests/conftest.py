@@ -1,0 +1,39 @@
+"""Shared fixtures: a run of the default case (made once per session) and helpers."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def pantohil(*args: str, cwd: Path | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
+    """Run the installed CLI as a user would."""
+    return subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def load_run(folder: Path) -> tuple[dict, np.ndarray]:
+    summary = json.loads((folder / "summary.json").read_text())
+    span = np.loadtxt(folder / "steady_span.csv", delimiter=",", skiprows=1)
+    return summary, span
+
+
+@pytest.fixture(scope="session", autouse=True)
+def isolated_cache(tmp_path_factory):
+    """Build FMUs into a cache of the test session's own, so tests also exercise a cold cache."""
+    os.environ["PANTOHIL_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+
+
+@pytest.fixture(scope="session")
+def default_run(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("runs") / "default"
+    proc = pantohil("run", "--out", str(out), "--quiet")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return out
