@@ -78,7 +78,7 @@ def run_case(case: Case, out_dir: Path, progress: bool = True) -> RunResult:
     f_lim, z_lim = run["force_limit_N"], run["height_limit_m"]
     cat_z = master.real_outputs["catenary"].index("height_command")
     rig_f = master.real_outputs["rig"].index("measured_force")
-    bar = tqdm(total=run["max_spans"], unit="span", disable=not progress, leave=False, desc=case.name)
+    bar = tqdm(total=run["max_spans"], unit="span", disable=None if progress else True, leave=False, desc=case.name)
     t_start = time.perf_counter()
     try:
         for span in range(run["max_spans"]):
