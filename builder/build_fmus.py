@@ -26,7 +26,7 @@ from pantohil.models.profile import write_profile_csv
 
 from .system import FMU_NAMES, loop_latency_steps
 
-BUILDER_VERSION = "1"
+BUILDER_VERSION = "2"
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in FMU_NAMES}
@@ -84,6 +84,8 @@ def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
     files = [pkg]
     (stage / fmu_support.PARAMETERS_FILE).write_text(json.dumps(params, indent=1, sort_keys=True))
     files.append(stage / fmu_support.PARAMETERS_FILE)
+    (stage / fmu_support.REQUIREMENTS_FILE).write_text("\n".join(fmu_support.REQUIREMENTS) + "\n")
+    files.append(stage / fmu_support.REQUIREMENTS_FILE)
     if name == "catenary":
         write_profile_csv(stage / "profile.csv", case.profile)
         files.append(stage / "profile.csv")
@@ -108,14 +110,19 @@ def _variables(name: str):
 
 
 def decorate_model_description(xml_bytes: bytes, variables) -> bytes:
-    """Add unit definitions, units, ranges and descriptions to pythonfmu's modelDescription.xml."""
+    """Add unit and display-unit definitions, units, ranges and the generation tool to pythonfmu's
+    modelDescription.xml."""
     root = ET.fromstring(xml_bytes)
+    root.set("generationTool", f"pantohil {_version()} with {root.get('generationTool')}")
     by_name = {v.name: v for v in variables}
     used = sorted({v.unit for v in variables if v.kind == "real"})
     units = ET.Element("UnitDefinitions")
     for u in used:
         unit = ET.SubElement(units, "Unit", name=u)
         ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in fmu_support.UNITS[u].items()})
+        if u in fmu_support.DISPLAY_UNITS:
+            name, factor = fmu_support.DISPLAY_UNITS[u]
+            ET.SubElement(unit, "DisplayUnit", {"name": name, "factor": repr(factor)})
     cosim = root.find("CoSimulation")
     root.insert(list(root).index(cosim) + 1, units)
     for sv in root.iter("ScalarVariable"):
@@ -130,6 +137,15 @@ def decorate_model_description(xml_bytes: bytes, variables) -> bytes:
                 typ.set("max", repr(var.max) if typ.tag == "Real" else str(int(var.max)))
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("pantohil")
+    except PackageNotFoundError:
+        return "unknown"
 
 
 def _documentation(name: str, variables, description: str) -> str:

@@ -13,6 +13,8 @@ from pathlib import Path
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real
 
 PARAMETERS_FILE = "parameters.json"
+REQUIREMENTS_FILE = "requirements.txt"  # what `pythonfmu deploy` installs on a host
+REQUIREMENTS = ("numpy>=1.26", "scipy>=1.11")
 
 # SI base-unit exponents of every unit used by the FMUs (FMI 2.0 <BaseUnit>).
 UNITS = {
@@ -21,6 +23,8 @@ UNITS = {
     "N/m": {"kg": 1, "s": -2}, "N/m2": {"kg": 1, "m": -1, "s": -2}, "N.s/m": {"kg": 1, "s": -1},
     "m/s2": {"m": 1, "s": -2}, "1": {},
 }
+# Display units offered to tools: name -> (factor, of unit); display = factor * value
+DISPLAY_UNITS = {"m": ("mm", 1000.0), "m/s": ("km/h", 3.6), "N/m": ("kN/m", 1e-3)}
 
 
 @dataclass(frozen=True)

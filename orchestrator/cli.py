@@ -9,6 +9,7 @@ import argparse
 import json
 import signal
 import sys
+import tempfile
 from datetime import datetime
 from pathlib import Path
 
@@ -31,14 +32,24 @@ def _parser() -> argparse.ArgumentParser:
                                                                "catenary, built from FMI 2.0 co-simulation units.")
     sub = ap.add_subparsers(dest="command", required=True)
 
-    run = sub.add_parser("run", help="virtual HIL run of a case (FMUs stepped by the fmpy master)")
+    run = sub.add_parser("run", help="virtual HIL run of a case or of an SSP file written by `pantohil build --ssp`")
     _add_case_args(run, optional=True)
     run.add_argument("--out", type=Path, help="run folder (default: runs/<case>-<time>)")
+    run.add_argument("--master", choices=("fmpy", "libcosim"), default="fmpy",
+                     help="co-simulation master: pantohil's fmpy master or OSP's libcosim (default fmpy)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
-    build = sub.add_parser("build", help="build and validate the FMUs of a case")
+    build = sub.add_parser("build", help="build and validate the FMUs of a case; optionally an SSP file")
     _add_case_args(build, optional=True)
-    build.add_argument("--out", type=Path, required=True, help="folder for the FMUs")
+    build.add_argument("--out", type=Path, help="folder for the FMUs")
+    build.add_argument("--ssp", type=Path, metavar="FILE.ssp",
+                       help="also write the whole system as an SSP file, with an OSP system structure next to it")
+
+    package = sub.add_parser("package", help="folder for a partner lab: FMUs, SSP/OSP files, runner, reference results")
+    _add_case_args(package, optional=True)
+    package.add_argument("--out", type=Path, required=True, help="package folder (must not exist or be empty)")
+    package.add_argument("--zip", action="store_true", help="also write OUT.zip")
+    package.add_argument("--quiet", action="store_true", help="no progress bar")
 
     direct = sub.add_parser("direct", help="closed-form ASM steady state of a case (Paper A)")
     _add_case_args(direct, optional=True)
@@ -52,9 +63,23 @@ def _parser() -> argparse.ArgumentParser:
 def _cmd_run(args) -> int:
     from pantohil.orchestrator.hil_run import run_case
 
-    case = load_case(args.case, args.overrides)
+    system = None
+    if args.case is not None and args.case.suffix == ".ssp":
+        from pantohil.builder.ssp import SspError, read_ssp, temporary_dir
+
+        if any(not o.startswith("run.") for o in args.overrides):
+            raise CaseError("--set: an SSP file fixes its system; only run.* keys can be overridden")
+        if not args.case.exists():
+            raise CaseError(f"SSP file {args.case} does not exist")
+        try:
+            system = read_ssp(args.case, temporary_dir("pantohil_ssp_"))
+        except SspError as exc:
+            raise CaseError(str(exc)) from None
+        case = load_case(system["case_file"], args.overrides)
+    else:
+        case = load_case(args.case, args.overrides)
     out = args.out or Path("runs") / f"{case.name}-{datetime.now():%Y%m%d-%H%M%S}"
-    result = run_case(case, out, progress=not args.quiet)
+    result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system)
     cf = result.get("contact_force", {})
     print(f"{result['status']}: {result['message']}")
     if cf:
@@ -72,13 +97,37 @@ def _cmd_build(args) -> int:
     from pantohil.orchestrator.hil_run import delay_plan
 
     case = load_case(args.case, args.overrides)
-    fmus = build_case_fmus(case, args.out, delay_plan(case)["delay_steps"])
-    bad = 0
-    for name, path in fmus.items():
-        problems = validate_fmu(str(path))
-        bad += len(problems)
-        print(f"{path}: {'valid' if not problems else '; '.join(problems)}")
+    if args.out is None and args.ssp is None:
+        raise CaseError("build: give --out DIR, --ssp FILE.ssp, or both")
+    plan = delay_plan(case)
+    with tempfile.TemporaryDirectory(prefix="pantohil_build_") as tmp:
+        fmus = build_case_fmus(case, args.out or Path(tmp), plan["delay_steps"])
+        bad = 0
+        for name, path in fmus.items():
+            problems = validate_fmu(str(path))
+            bad += len(problems)
+            if args.out is not None:
+                print(f"{path}: {'valid' if not problems else '; '.join(problems)}")
+        if args.ssp is not None:
+            from pantohil.orchestrator.package import make_ssp
+
+            ssp = make_ssp(case, fmus, args.ssp, args.overrides)
+            print(f"{ssp}: SSP of {len(fmus)} FMUs; OSP system structure in {ssp.parent / (ssp.stem + '_osp')}")
     return 1 if bad else 0
+
+
+def _cmd_package(args) -> int:
+    import shutil
+
+    from pantohil.orchestrator.package import make_package
+
+    case = load_case(args.case, args.overrides)
+    out = make_package(case, args.out, args.overrides, progress=not args.quiet)
+    if args.zip:
+        archive = shutil.make_archive(str(out), "zip", root_dir=out.parent, base_dir=out.name)
+        print(f"archive: {archive}")
+    print(f"partner package: {out} (see its README.md)")
+    return 0
 
 
 def _cmd_direct(args) -> int:
@@ -110,7 +159,7 @@ def _terminate(signum, frame):
 def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _terminate)
     args = _parser().parse_args(argv)
-    handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct}[args.command]
+    handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package}[args.command]
     try:
         return handler(args)
     except CaseError as exc:

@@ -90,7 +90,9 @@ class FmuInstance:
     def close(self) -> None:
         try:
             self.slave.terminate()
-            self.slave.freeInstance()
+            # not slave.freeInstance(), which also unloads the library: pythonfmu's binary owns Python
+            # objects that can outlive the instance, and unloading it can crash the interpreter at exit
+            self.slave.fmi2FreeInstance(self.component)
         except Exception:  # already failed: still remove the extracted files
             pass
         shutil.rmtree(self._dir, ignore_errors=True)

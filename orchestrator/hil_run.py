@@ -56,20 +56,37 @@ def closed_form_reference(case: Case) -> np.ndarray:
     return ss.force_series(case.samples_per_span)
 
 
-def run_case(case: Case, out_dir: Path, progress: bool = True) -> RunResult:
+MASTERS = ("fmpy", "libcosim")
+
+
+def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str = "fmpy",
+             system: dict | None = None) -> RunResult:
+    """Run a case. `system` (fmus, connections, parameters), e.g. from an SSP file, replaces the build."""
+    if master_kind not in MASTERS:
+        raise CaseError(f"--master: must be one of {', '.join(MASTERS)} (got {master_kind!r})")
     plan = delay_plan(case)  # validates before anything is written
     n, dt = case.samples_per_span, case.dt_s
     run = case.values["run"]
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     t_build = time.perf_counter()
-    fmus = build_case_fmus(case, out_dir / "fmus", plan["delay_steps"])
+    if system is None:
+        fmus = build_case_fmus(case, out_dir / "fmus", plan["delay_steps"])
+        connections, parameters = CONNECTIONS, {"catenary": {"delay_steps": plan["delay_steps"]}}
+    else:
+        fmus, connections, parameters = system["fmus"], system["connections"], system["parameters"]
+        plan["delay_steps"] = parameters.get("catenary", {}).get("delay_steps", plan["delay_steps"])
     build_s = time.perf_counter() - t_build
     capacity = run["max_spans"] * n
     recorder = McapRecorder(out_dir / "run.mcap", MCAP_GROUPS | {"/convergence": {}},
-                            {"case": case.name, "dt_s": dt, "samples_per_span": n})
+                            {"case": case.name, "dt_s": dt, "samples_per_span": n, "master": master_kind})
     try:
-        master = JacobiMaster(fmus, CONNECTIONS, {"catenary": {"delay_steps": plan["delay_steps"]}}, dt, capacity)
+        if master_kind == "libcosim":
+            from .libcosim_master import LibcosimMaster
+
+            master = LibcosimMaster(fmus, connections, parameters, dt, capacity)
+        else:
+            master = JacobiMaster(fmus, connections, parameters, dt, capacity)
     except Exception:
         recorder.close()
         raise
@@ -111,7 +128,7 @@ def run_case(case: Case, out_dir: Path, progress: bool = True) -> RunResult:
         recorder.close()
         per_step = master.per_step_us()
         master.close()
-    return _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, build_s, per_step)
+    return _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, build_s, per_step, master_kind)
 
 
 class _Diverged(Exception):
@@ -133,11 +150,12 @@ def _log_span(recorder: McapRecorder, master: JacobiMaster, start: int, stop: in
         recorder.write_block(topic, t, np.column_stack(cols))
 
 
-def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, build_s, per_step) -> RunResult:
+def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, build_s, per_step,
+            master_kind) -> RunResult:
     n, dt = case.samples_per_span, case.dt_s
     spans_done = master.k // n
     summary = {
-        "case": case.name, "status": status, "message": message,
+        "case": case.name, "master": master_kind, "status": status, "message": message,
         "converged": status == "converged", "diverged": status == "diverged",
         "spans": spans_done, "samples_per_span": n, "dt_s": dt, "speed_kmh": case.speed_kmh,
         "catenary": {"model": "asm", "span_m": case.span_m, **asdict(case.catenary)},

@@ -11,7 +11,44 @@ import numpy as np
 from .fmu_runtime import FmuInstance
 
 
-class JacobiMaster:
+class RecordingMaster:
+    """What every master records: each FMU's real and integer outputs and the inputs it was given,
+    step by step, plus the wall time of each FMU's step (where the master can tell)."""
+
+    def _init_records(self, descriptions: dict, connections, capacity: int) -> None:
+        self.real_outputs = {n: [v.name for v in d.modelVariables if v.causality == "output" and v.type == "Real"]
+                             for n, d in descriptions.items()}
+        self.int_outputs = {n: [v.name for v in d.modelVariables if v.causality == "output" and v.type == "Integer"]
+                            for n, d in descriptions.items()}
+        self._in_map, self.input_names = {}, {}
+        for n in self.names:
+            wires = [(c[3], c[0], self.real_outputs[c[0]].index(c[1])) for c in connections if c[2] == n]
+            if wires:
+                self.input_names[n] = [w[0] for w in wires]
+                self._in_map[n] = [(w[1], w[2]) for w in wires]
+        self.record = {n: np.zeros((capacity, len(self.real_outputs[n]))) for n in self.names}
+        self.record_int = {n: np.zeros((capacity, len(self.int_outputs[n])), dtype=np.int64)
+                           for n in self.names if self.int_outputs[n]}
+        self.record_in = {n: np.zeros((capacity, len(m))) for n, m in self._in_map.items()}
+        self.step_ns = {n: np.zeros(capacity, dtype=np.int64) for n in self.names}
+        self.k = 0
+
+    def column(self, fmu: str, output: str, start: int = 0, stop: int | None = None) -> np.ndarray:
+        stop = self.k if stop is None else stop
+        if output in self.real_outputs[fmu]:
+            return self.record[fmu][start:stop, self.real_outputs[fmu].index(output)]
+        return self.record_int[fmu][start:stop, self.int_outputs[fmu].index(output)]
+
+    def input_column(self, fmu: str, src: str, output: str, start: int = 0, stop: int | None = None) -> np.ndarray:
+        stop = self.k if stop is None else stop
+        j = self._in_map[fmu].index((src, self.real_outputs[src].index(output)))
+        return self.record_in[fmu][start:stop, j]
+
+    def per_step_us(self) -> dict[str, float]:
+        return {n: float(np.median(self.step_ns[n][: self.k])) / 1000.0 for n in self.step_ns} if self.k else {}
+
+
+class JacobiMaster(RecordingMaster):
     """Steps named FMUs connected by (src, output, dst, input) tuples and records every real output."""
 
     def __init__(self, fmus: dict[str, Path], connections, parameters: dict[str, dict], dt: float,
@@ -27,27 +64,11 @@ class JacobiMaster:
         except Exception:
             self.close()
             raise
-        self.real_outputs = {n: [v.name for v in inst.description.modelVariables
-                                 if v.causality == "output" and v.type == "Real"]
-                             for n, inst in self.instances.items()}
-        self.int_outputs = {n: [v.name for v in inst.description.modelVariables
-                                if v.causality == "output" and v.type == "Integer"]
-                            for n, inst in self.instances.items()}
+        self._init_records({n: i.description for n, i in self.instances.items()}, connections, capacity)
         self._out = {n: self.instances[n].port(self.real_outputs[n]) for n in self.names}
         self._out_int = {n: self.instances[n].port(self.int_outputs[n]) for n in self.names if self.int_outputs[n]}
-        self._in, self._in_map = {}, {}
-        for n in self.names:
-            wires = [(c[3], c[0], self.real_outputs[c[0]].index(c[1])) for c in connections if c[2] == n]
-            if wires:
-                self._in[n] = self.instances[n].port([w[0] for w in wires])
-                self._in_map[n] = [(w[1], w[2]) for w in wires]
+        self._in = {n: self.instances[n].port(names) for n, names in self.input_names.items()}
         self.values = {n: self._out[n].read() for n in self.names}  # outputs after initialisation
-        self.inputs = {n: [0.0] * len(m) for n, m in self._in_map.items()}
-        self.record = {n: np.zeros((capacity, len(self.real_outputs[n]))) for n in self.names}
-        self.record_int = {n: np.zeros((capacity, len(self.int_outputs[n])), dtype=np.int64) for n in self._out_int}
-        self.record_in = {n: np.zeros((capacity, len(m))) for n, m in self._in_map.items()}
-        self.step_ns = {n: np.zeros(capacity, dtype=np.int64) for n in self.names}
-        self.k = 0
         self._steps = self._plan()
 
     def _plan(self):
@@ -80,20 +101,6 @@ class JacobiMaster:
             rec[k] = out
         self.values = new_values
         self.k = k + 1
-
-    def column(self, fmu: str, output: str, start: int = 0, stop: int | None = None) -> np.ndarray:
-        stop = self.k if stop is None else stop
-        if output in self.real_outputs[fmu]:
-            return self.record[fmu][start:stop, self.real_outputs[fmu].index(output)]
-        return self.record_int[fmu][start:stop, self.int_outputs[fmu].index(output)]
-
-    def input_column(self, fmu: str, src: str, output: str, start: int = 0, stop: int | None = None) -> np.ndarray:
-        stop = self.k if stop is None else stop
-        j = self._in_map[fmu].index((src, self.real_outputs[src].index(output)))
-        return self.record_in[fmu][start:stop, j]
-
-    def per_step_us(self) -> dict[str, float]:
-        return {n: float(np.median(self.step_ns[n][: self.k])) / 1000.0 for n in self.names} if self.k else {}
 
     def close(self) -> None:
         for inst in self.instances.values():
