@@ -26,20 +26,23 @@ from pantohil.models.profile import write_profile_csv
 
 from .system import FMU_NAMES, loop_latency_steps
 
-BUILDER_VERSION = "2"
+BUILDER_VERSION = "8"
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
-SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in FMU_NAMES}
-CLASS_NAMES = {"catenary": "PantohilCatenary", "rig": "PantohilRig", "pantograph": "PantohilPantograph"}
+SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}
+CLASS_NAMES = {"catenary": "PantohilCatenary", "rig": "PantohilRig", "pantograph": "PantohilPantograph",
+               "adapter": "PantohilAdapter"}
+SUPPORT_MODULES = ("__init__.py", "fmu_support.py", "udp_protocol.py")
 
 
 def cache_root() -> Path:
     return Path(os.environ.get("PANTOHIL_CACHE", Path.home() / ".cache" / "pantohil"))
 
 
-def fmu_parameters(case: Case, delay_steps: int) -> dict[str, dict]:
+def fmu_parameters(case: Case, delay_steps: int, rig_address: tuple[str, int] = ("127.0.0.1", 47800)) -> dict[str, dict]:
     """The case as FMU parameter values, by FMU."""
     cat, pan, rig = case.catenary, case.pantograph, case.rig
+    link, act = case.values["link"], case.values["actuator"]
     n = pan.n
     pad = lambda xs: list(xs) + [0.0] * (3 - len(xs))
     masses, stiff, damp = pad(pan.masses_kg), pad(pan.stiffnesses_N_m), pad(pan.dampings_Ns_m)
@@ -66,6 +69,14 @@ def fmu_parameters(case: Case, delay_steps: int) -> dict[str, dict]:
             "loadcell_cutoff": rig.loadcell_cutoff_hz, "force_offset": rig.force_offset_N,
             "noise_std": rig.noise_std_N, "noise_seed": rig.noise_seed, "time_step": case.dt_s,
         },
+        "adapter": {
+            "rig_host": rig_address[0], "rig_port": rig_address[1], "local_port": link["local_port"],
+            "receive_timeout": link["receive_timeout_s"], "tolerated_losses": link["tolerated_losses"],
+            "pipeline_steps": link["pipeline_steps"],
+            "stroke_min": act["stroke_min_m"], "stroke_max": act["stroke_max_m"],
+            "max_velocity": act["max_velocity_m_s"], "max_acceleration": act["max_acceleration_m_s2"],
+            "time_step": case.dt_s,
+        },
     }
 
 
@@ -79,7 +90,7 @@ def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
     pkg = stage / "pantohil"
     shutil.copytree(MODELS_DIR, pkg / "models", ignore=shutil.ignore_patterns("__pycache__", "*.toml", "cases"))
     (pkg / "fmus").mkdir()
-    for f in ("__init__.py", "fmu_support.py"):
+    for f in SUPPORT_MODULES:
         shutil.copy2(FMUS_DIR / f, pkg / "fmus" / f)
     files = [pkg]
     (stage / fmu_support.PARAMETERS_FILE).write_text(json.dumps(params, indent=1, sort_keys=True))
@@ -148,13 +159,24 @@ def _version() -> str:
         return "unknown"
 
 
-def _documentation(name: str, variables, description: str) -> str:
+LIMITS = ("The periodic method gives the steady state of a pantograph running along an endless line of equal "
+          "spans: no overlaps, section ends, local irregularities or curves. The HIL iteration converges only "
+          "where it is stable: keep the highest harmonic below the pantograph's contact frequency, or the loop "
+          "delay short (Gil et al., Paper D sec. 4).")
+
+
+def _documentation(name: str, variables, description: str, method: str) -> str:
     rows = "".join(f"<tr><td>{html.escape(v.name)}</td><td>{v.causality}</td><td>{html.escape(v.unit)}</td>"
                    f"<td>{html.escape(v.description)}</td></tr>" for v in variables)
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>pantohil {name}</title></head><body>"
             f"<h1>pantohil {name} FMU</h1><p>{html.escape(description)}</p>"
-            "<p>FMI 2.0 co-simulation, built with pythonfmu: the host needs Python with numpy and scipy. "
-            "Case data are in resources/parameters.json.</p>"
+            f"<h2>Method</h2><p>{html.escape(method)}</p><h2>Limits</h2><p>{html.escape(LIMITS)}</p>"
+            "<h2>Running it</h2><p>FMI 2.0 co-simulation, built with pythonfmu: the host needs Python 3.11 with "
+            "numpy and scipy (resources/requirements.txt). Case data are the start values, also in "
+            "resources/parameters.json. Connect catenary.height_command to rig.height_command, "
+            "rig.actuator_height to pantograph.height, pantograph.contact_force to rig.true_force and "
+            "rig.measured_force to catenary.contact_force; set catenary.delay_steps to the loop latency of "
+            "the master plus rig.latency_steps.</p><h2>Variables</h2>"
             f"<table border='1'><tr><th>variable</th><th>causality</th><th>unit</th><th>description</th></tr>{rows}"
             "</table></body></html>")
 
@@ -185,7 +207,8 @@ def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path
             doc.mkdir()
             module = importlib.import_module(f"pantohil.fmus.pantohil_{name}")
             description = getattr(module, CLASS_NAMES[name]).description
-            (doc / "index.html").write_text(_documentation(name, variables, description))
+            method = " ".join((module.__doc__ or "").split())
+            (doc / "index.html").write_text(_documentation(name, variables, description, method))
             out = Path(tmp) / "out"
             with contextlib.redirect_stdout(io.StringIO()):
                 fmu = pythonfmu.FmuBuilder.build_FMU(SCRIPTS[name], dest=out, project_files=files,
@@ -203,8 +226,9 @@ def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path
     return target, hit
 
 
-def build_case_fmus(case: Case, dest_dir: Path, delay_steps: int | None = None) -> dict[str, Path]:
-    """The three FMUs of a case in dest_dir, with the case's values as their start values."""
+def build_case_fmus(case: Case, dest_dir: Path, delay_steps: int | None = None, names=FMU_NAMES,
+                    rig_address: tuple[str, int] = ("127.0.0.1", 47800)) -> dict[str, Path]:
+    """The FMUs of a case in dest_dir, with the case's values as their start values."""
     d = default_delay_steps(case) if delay_steps is None else delay_steps
-    params = fmu_parameters(case, d)
-    return {name: build_fmu(name, params[name], case, Path(dest_dir))[0] for name in FMU_NAMES}
+    params = fmu_parameters(case, d, rig_address)
+    return {name: build_fmu(name, params[name], case, Path(dest_dir))[0] for name in names}

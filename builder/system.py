@@ -7,12 +7,19 @@ the force it answers was measured there: the catenary's delay advance must inclu
 from __future__ import annotations
 
 FMU_NAMES = ("catenary", "rig", "pantograph")
+HARDWARE_FMU_NAMES = ("catenary", "adapter")
 
 CONNECTIONS = (
     ("catenary", "height_command", "rig", "height_command"),
     ("rig", "actuator_height", "pantograph", "height"),
     ("pantograph", "contact_force", "rig", "true_force"),
     ("rig", "measured_force", "catenary", "contact_force"),
+)
+
+# On a real rig (or the rig emulator) the adapter stands for rig and pantograph: 2 connections.
+HARDWARE_CONNECTIONS = (
+    ("catenary", "height_command", "adapter", "height_command"),
+    ("adapter", "measured_force", "catenary", "contact_force"),
 )
 
 

@@ -10,7 +10,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real, String
 
 PARAMETERS_FILE = "parameters.json"
 REQUIREMENTS_FILE = "requirements.txt"  # what `pythonfmu deploy` installs on a host
@@ -30,7 +30,7 @@ DISPLAY_UNITS = {"m": ("mm", 1000.0), "m/s": ("km/h", 3.6), "N/m": ("kN/m", 1e-3
 @dataclass(frozen=True)
 class Var:
     name: str
-    kind: str  # "real" | "integer" | "boolean"
+    kind: str  # "real" | "integer" | "boolean" | "string"
     causality: str  # "parameter" | "input" | "output"
     unit: str
     description: str
@@ -51,7 +51,7 @@ def register_all(slave, variables: list[Var]) -> None:
     given = load_parameters(slave.resources)
     for var in variables:
         value = given.get(var.name, var.start) if var.causality == "parameter" else var.start
-        setattr(slave, var.name, {"real": float, "integer": int, "boolean": bool}[var.kind](value))
+        setattr(slave, var.name, {"real": float, "integer": int, "boolean": bool, "string": str}[var.kind](value))
         causality = getattr(Fmi2Causality, var.causality)
         desc = f"{var.description} [{var.unit}]" if var.unit != "1" else var.description
         if var.causality == "parameter":
@@ -62,5 +62,5 @@ def register_all(slave, variables: list[Var]) -> None:
         else:
             kw = dict(causality=causality, initial=Fmi2Initial.exact,
                       variability=Fmi2Variability.continuous if var.kind == "real" else Fmi2Variability.discrete)
-        cls = {"real": Real, "integer": Integer, "boolean": Boolean}[var.kind]
+        cls = {"real": Real, "integer": Integer, "boolean": Boolean, "string": String}[var.kind]
         slave.register_variable(cls(var.name, description=desc, **kw), nested=False)

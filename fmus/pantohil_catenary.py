@@ -30,12 +30,13 @@ VARIABLES = [
     Var("relaxation", "real", "parameter", "1", "Relaxation mu_c (Paper D eq. 10)", 0.1, 0.0, 1.0),
     Var("ramp_steps", "integer", "parameter", "1", "Initial ramp N_r in steps (0: none)", 0, 0),
     Var("delay_steps", "integer", "parameter", "1", "Delay advance D in steps: the loop latency to compensate", 1, 0),
-    Var("contact_force", "real", "input", "N", "Measured contact force (pushing the wire up is positive)", 0.0),
+    Var("contact_force", "real", "input", "N", "Measured contact force (pushing the wire up is positive); NaN: not measured", 0.0),
     Var("height_command", "real", "output", "m", "Contact-point height commanded D samples ahead", 0.0),
     Var("sample_index", "integer", "output", "1", "Label n of the force just received, 0..N-1 in the span", 0),
     Var("span_index", "integer", "output", "1", "Virtual span (block) of the force just received", 0),
     Var("height_at_sample", "real", "output", "m", "Converging wire height at sample_index", 0.0),
     Var("profile_at_sample", "real", "output", "m", "Static wire height z0 (unfiltered) at sample_index", 0.0),
+    Var("force_at_sample", "real", "output", "N", "Force in use at sample_index: the measured one, or the previous span's if it was not measured (NaN input)", 0.0),
     Var("harmonics", "integer", "output", "1", "Harmonics kept N_h (0..N_h-1)", 0),
 ]
 
@@ -68,4 +69,5 @@ class PantohilCatenary(Fmi2Slave):
         self.sample_index, self.span_index = label, span
         self.height_at_sample = hil.current_height(label)
         self.profile_at_sample = float(self._z0[label])
+        self.force_at_sample = float(hil.last_force[label])
         return True

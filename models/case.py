@@ -86,6 +86,19 @@ SCHEMA = {
         "noise_std_N": (float, 0.0, _nonneg, "must be >= 0", "measurement noise std [N]"),
         "noise_seed": (int, 0, _nonneg, "must be >= 0", "noise seed [-]"),
     },
+    "link": {
+        "receive_timeout_s": (float, 0.0003, _pos, "must be > 0", "how long a step waits for the awaited answer [s]"),
+        "pipeline_steps": (int, 1, lambda p: p in (0, 1), "must be 0 or 1",
+                           "1: use the answer to the previous command (no waiting on the network) [steps]"),
+        "tolerated_losses": (int, 50, _nonneg, "must be >= 0", "consecutive missing answers before a fault [-]"),
+        "local_port": (int, 0, lambda p: 0 <= p < 65536, "must be a port number (0: any)", "local UDP port [-]"),
+    },
+    "actuator": {
+        "stroke_min_m": (float, -0.12, None, "", "lowest actuator position [m]"),
+        "stroke_max_m": (float, 0.12, None, "", "highest actuator position [m]"),
+        "max_velocity_m_s": (float, 5.4, _pos, "must be > 0", "velocity limit (LinMot PS10-70x240U) [m/s]"),
+        "max_acceleration_m_s2": (float, 300.0, _pos, "must be > 0", "acceleration limit [m/s^2]"),
+    },
     "hil": {
         "update": (str, "step", lambda s: s in UPDATES, "must be \"step\" or \"span\"", "update strategy"),
         "relaxation": (float, 0.1, _unit, "must be in (0, 1]", "mu_c [-]"),
@@ -306,6 +319,9 @@ def build_case(raw: dict, source: Path) -> Case:
                         f"than a span ({n} steps)")
     if hil["delay_steps"] >= n:
         raise CaseError(f"hil.delay_steps: {hil['delay_steps']} steps must be shorter than a span ({n} steps)")
+    act = v["actuator"]
+    if not act["stroke_min_m"] < act["stroke_max_m"]:
+        raise CaseError(f"actuator.stroke_max_m: must be above actuator.stroke_min_m ({act['stroke_min_m']:g} m)")
     profile = _check_profile(v, source)
     return Case(v["case"]["name"], source, v, cat, pan, rig, profile, speed, span, n, dt,
                 harmonic_count(hil["max_frequency_hz"], n, dt), hil["update"], hil["relaxation"],

@@ -3,9 +3,11 @@
 Each call to `step` receives the force measured at the current sample of the current virtual span
 (block) and returns the height to command, advanced by `delay_steps` samples so that it is reached
 when the pantograph gets there (Paper D sec. 3.4). Samples are labelled n = 0..N-1 within a block.
+A NaN force means "not measured" (a lost datagram): that sample keeps its previous value.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,6 +42,7 @@ class PeriodicHil:
         self.z = self.z0.copy()  # z^k (step) / latest block vector z^b (span)
         self._z_older = self.z0.copy()  # z^{b-1} while z holds z^b (span)
         self._block_force = np.zeros(self.n)
+        self.last_force = np.zeros(self.n)  # the force in use at each sample (measured, or kept when lost)
 
     @property
     def sample(self) -> int:
@@ -57,14 +60,19 @@ class PeriodicHil:
     def step(self, force: float) -> float:
         n_bar = self.k % self.n
         mu = self.s.relaxation
+        measured = not math.isnan(force)  # NaN: not measured; the sample keeps its previous value
+        if measured:
+            self.last_force[n_bar] = force
         if self.s.update == "step":
-            delta = mu * (force - self.force_relaxed[n_bar])  # Paper D eq. (10)
-            self.force_relaxed[n_bar] += delta
-            if delta != 0.0:
-                self.z += delta * self.op.column(n_bar)
+            if measured:
+                delta = mu * (force - self.force_relaxed[n_bar])  # Paper D eq. (10)
+                self.force_relaxed[n_bar] += delta
+                if delta != 0.0:
+                    self.z += delta * self.op.column(n_bar)
             command = self.z[(n_bar + self.s.delay_steps) % self.n]
         else:
-            self._block_force[n_bar] = force
+            if measured:
+                self._block_force[n_bar] = force
             command = self._span_command(n_bar)
             if n_bar == self.n - 1:  # block complete: Paper D eq. (A.8)
                 z_new = mu * (self.z0 + self.op.apply(self._block_force)) + (1 - mu) * self.z

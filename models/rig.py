@@ -103,12 +103,18 @@ class Rig:
         j = (self._count - 1) % n + 1
         return self._ref_old + (self._ref_new - self._ref_old) * j / n
 
-    def step(self, z_command: float, f_true: float) -> tuple[float, float]:
+    def height(self, z_command: float) -> float:
+        """Height path: delay, decimation with the drive's ramp, servo."""
         z = self._drive(self._delayed(z_command))
-        if self._servo is not None:
-            z = self._servo(z)
+        return z if self._servo is None else self._servo(z)
+
+    def force(self, f_true: float) -> float:
+        """Force path: load-cell filter, offset, noise."""
         f = f_true if self._loadcell is None else self._loadcell(f_true)
         f += self.p.force_offset_N
         if self.p.noise_std_N > 0:
             f += float(self._rng.normal(0.0, self.p.noise_std_N))
-        return z, f
+        return f
+
+    def step(self, z_command: float, f_true: float) -> tuple[float, float]:
+        return self.height(z_command), self.force(f_true)

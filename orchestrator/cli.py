@@ -37,9 +37,29 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, help="run folder (default: runs/<case>-<time>)")
     run.add_argument("--master", choices=("fmpy", "libcosim"), default="fmpy",
                      help="co-simulation master: pantohil's fmpy master or OSP's libcosim (default fmpy)")
+    run.add_argument("--hardware", metavar="HOST:PORT",
+                     help="run against a rig controller (or `pantohil rig-emulator`) through the adapter FMU")
+    run.add_argument("--realtime", action="store_true", help="pace the master against the wall clock at dt")
+    run.add_argument("--rt-priority", type=int, default=50, metavar="P",
+                     help="with --realtime: SCHED_FIFO priority if permitted (0: normal scheduling; default 50)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
-    build = sub.add_parser("build", help="build and validate the FMUs of a case; optionally an SSP file")
+    emu = sub.add_parser("rig-emulator", help="play a rig controller over UDP for a case (lockstep, fault injection)")
+    emu.add_argument("--listen", required=True, metavar="HOST:PORT", help="address to listen on")
+    emu.add_argument("--case", type=Path, help="case file (TOML); default: the built-in case")
+    emu.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    for name, what in (("loss", "drop an answer"), ("reorder", "send an answer after the next one"),
+                       ("duplicate", "send an answer twice"), ("corrupt", "flip a bit of an answer")):
+        emu.add_argument(f"--{name}", type=float, default=0.0, metavar="P", help=f"probability to {what}")
+    emu.add_argument("--delay-us", type=float, default=0.0, help="wait this long before each answer [us]")
+    emu.add_argument("--seed", type=int, default=0, help="seed of the fault injection")
+    emu.add_argument("--stats", type=Path, help="write the emulator's counters to this JSON file")
+    emu.add_argument("--max-seconds", type=float, help="stop after this long (default: until SIGTERM/Ctrl-C)")
+    emu.add_argument("--rt-priority", type=int, default=49, metavar="P",
+                     help="SCHED_FIFO priority if permitted (0: normal scheduling; default 49)")
+
+    build = sub.add_parser("build", help="build and validate the four FMUs of a case (catenary, rig, pantograph, "
+                                         "hardware adapter); optionally an SSP file of the virtual HIL system")
     _add_case_args(build, optional=True)
     build.add_argument("--out", type=Path, help="folder for the FMUs")
     build.add_argument("--ssp", type=Path, metavar="FILE.ssp",
@@ -78,22 +98,64 @@ def _cmd_run(args) -> int:
         case = load_case(system["case_file"], args.overrides)
     else:
         case = load_case(args.case, args.overrides)
+    hardware = None
+    if args.hardware is not None:
+        from pantohil.fmus.udp_protocol import parse_endpoint
+
+        try:
+            hardware = parse_endpoint(args.hardware)
+        except ValueError as exc:
+            raise CaseError(f"--hardware: {exc}") from None
     out = args.out or Path("runs") / f"{case.name}-{datetime.now():%Y%m%d-%H%M%S}"
-    result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system)
+    result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system,
+                      hardware=hardware, realtime=args.realtime, rt_priority=args.rt_priority)
     cf = result.get("contact_force", {})
     print(f"{result['status']}: {result['message']}")
     if cf:
         print(f"contact force: mean {cf['mean_N']:.2f} N, std {cf['std_N']:.2f} N, "
               f"20 Hz std {cf['filtered_20hz']['std_N']:.2f} N; "
               f"{result['timing']['realtime_factor']:.1f}x real time")
+    if "realtime" in result:
+        rt = result["realtime"]
+        print(f"real time ({rt['scheduling']}): {rt['deadline_misses']} of {rt['steps']} deadlines missed; lateness p50 "
+              f"{rt['lateness_us']['p50']:.0f} us, p99 {rt['lateness_us']['p99']:.0f} us, max {rt['lateness_us']['max']:.0f} us")
+    if "link" in result:
+        ln = result["link"]
+        print("link: " + ", ".join(f"{k} {ln[k]}" for k in ("sent", "received", "lost", "late", "reordered", "duplicated", "malformed", "limited")))
     print(f"run folder: {out}")
+    if result["status"] == "link_lost":
+        print(f"pantohil: error: {result['message']}", file=sys.stderr)
     return result.exit_code
+
+
+def _cmd_emulator(args) -> int:
+    from pantohil.fmus.udp_protocol import parse_endpoint
+    from pantohil.orchestrator.rig_emulator import Faults, RigEmulator
+
+    case = load_case(args.case, args.overrides)
+    try:
+        listen = parse_endpoint(args.listen, listening=True)
+        faults = Faults(args.loss, args.reorder, args.duplicate, args.corrupt, args.delay_us, args.seed)
+    except ValueError as exc:
+        raise CaseError(f"--listen: {exc}" if "HOST:PORT" in str(exc) else str(exc)) from None
+    try:
+        emulator = RigEmulator(case, listen, faults, args.stats)
+    except OSError as exc:
+        raise CaseError(f"--listen: cannot listen on {args.listen}: {exc.strerror}") from None
+    from pantohil.orchestrator.pacing import set_realtime_priority
+
+    scheduling = set_realtime_priority(args.rt_priority)
+    print(f"rig emulator for {case.name} listening on {emulator.address[0]}:{emulator.address[1]} ({scheduling})",
+          flush=True)
+    emulator.serve(args.max_seconds)
+    return 0
 
 
 def _cmd_build(args) -> int:
     from fmpy.validation import validate_fmu
 
     from pantohil.builder.build_fmus import build_case_fmus
+    from pantohil.builder.system import FMU_NAMES
     from pantohil.orchestrator.hil_run import delay_plan
 
     case = load_case(args.case, args.overrides)
@@ -101,7 +163,8 @@ def _cmd_build(args) -> int:
         raise CaseError("build: give --out DIR, --ssp FILE.ssp, or both")
     plan = delay_plan(case)
     with tempfile.TemporaryDirectory(prefix="pantohil_build_") as tmp:
-        fmus = build_case_fmus(case, args.out or Path(tmp), plan["delay_steps"])
+        names = ("catenary", "rig", "pantograph", "adapter") if args.out is not None else FMU_NAMES
+        fmus = build_case_fmus(case, args.out or Path(tmp), plan["delay_steps"], names)
         bad = 0
         for name, path in fmus.items():
             problems = validate_fmu(str(path))
@@ -111,7 +174,7 @@ def _cmd_build(args) -> int:
         if args.ssp is not None:
             from pantohil.orchestrator.package import make_ssp
 
-            ssp = make_ssp(case, fmus, args.ssp, args.overrides)
+            ssp = make_ssp(case, {n: fmus[n] for n in FMU_NAMES}, args.ssp, args.overrides)
             print(f"{ssp}: SSP of {len(fmus)} FMUs; OSP system structure in {ssp.parent / (ssp.stem + '_osp')}")
     return 1 if bad else 0
 
@@ -159,7 +222,8 @@ def _terminate(signum, frame):
 def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _terminate)
     args = _parser().parse_args(argv)
-    handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package}[args.command]
+    handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
+               "rig-emulator": _cmd_emulator}[args.command]
     try:
         return handler(args)
     except CaseError as exc:

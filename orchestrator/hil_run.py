@@ -1,17 +1,24 @@
-"""A virtual HIL run of a case: build the FMUs, step them with the Jacobi master, watch convergence,
-log to MCAP, and write the run folder (summary.json, steady_span.csv, run.mcap, plots)."""
+"""A HIL run of a case: build the FMUs, step them with a Jacobi master (fmpy or libcosim), in real time
+or as fast as possible, watch convergence, log to MCAP, and write the run folder (summary.json,
+steady_span.csv, run.mcap, plots).
+
+Two topologies: the virtual HIL (catenary -> rig -> pantograph -> rig -> catenary, all FMUs) and the
+hardware HIL (catenary <-> adapter FMU <-UDP-> rig controller or the rig emulator).
+"""
 from __future__ import annotations
 
 import math
+import os
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from pantohil.builder.build_fmus import build_case_fmus
-from pantohil.builder.system import CONNECTIONS, loop_latency_steps
+from pantohil.builder.system import (CONNECTIONS, FMU_NAMES, HARDWARE_CONNECTIONS, HARDWARE_FMU_NAMES,
+                                     loop_latency_steps)
 from pantohil.models.case import Case, CaseError
 from pantohil.models.closed_form import one_sided_harmonics, single_pantograph
 from pantohil.models.hil import ConvergenceMonitor
@@ -19,16 +26,42 @@ from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
 
 from . import report
 from .master import JacobiMaster
+from .pacing import Pacer, set_realtime_priority
 from .recorder import McapRecorder
 
-MCAP_GROUPS = {
-    "/catenary": {"height_command": "commanded height [m]", "contact_force": "force received [N]",
-                  "height_at_sample": "converging height at the sample [m]",
-                  "profile_at_sample": "static height z0 [m]", "sample_index": "sample label [-]",
-                  "span_index": "virtual span [-]"},
+MASTERS = ("fmpy", "libcosim")
+LINK_FAULT = 2
+EXIT_LINK_LOST = 3
+
+_CATENARY_GROUP = {"height_command": "commanded height [m]", "contact_force": "force received (NaN: not measured) [N]",
+                   "force_at_sample": "force in use at the sample [N]",
+                   "height_at_sample": "converging height at the sample [m]",
+                   "profile_at_sample": "static height z0 [m]", "sample_index": "sample label [-]",
+                   "span_index": "virtual span [-]"}
+
+
+@dataclass(frozen=True)
+class Topology:
+    name: str
+    fmus: tuple
+    connections: tuple
+    groups: dict  # MCAP topic -> {signal: description}; topic "/x" logs FMU x
+
+
+VIRTUAL = Topology("virtual", FMU_NAMES, CONNECTIONS, {
+    "/catenary": _CATENARY_GROUP,
     "/rig": {"actuator_height": "actuator height [m]", "measured_force": "measured force [N]"},
     "/pantograph": {"contact_force": "contact force [N]", "head_height": "head height [m]"},
-}
+})
+HARDWARE = Topology("hardware", HARDWARE_FMU_NAMES, HARDWARE_CONNECTIONS, {
+    "/catenary": _CATENARY_GROUP,
+    "/adapter": {"command_sent": "height sent, within the actuator limits [m]",
+                 "measured_force": "force from the rig (NaN: no answer) [N]",
+                 "actuator_height": "actuator height reported by the rig [m]", "link_state": "0 ok, 1 missing, 2 fault",
+                 "sent": "[-]", "received": "[-]", "lost": "[-]", "late": "[-]", "reordered": "[-]", "duplicated": "[-]",
+                 "malformed": "[-]", "limited": "[-]"},
+})
+LINK_COUNTERS = ("sent", "received", "lost", "late", "reordered", "duplicated", "malformed", "limited")
 
 
 class RunResult(dict):
@@ -36,11 +69,22 @@ class RunResult(dict):
 
     @property
     def exit_code(self) -> int:
+        if self["status"] == "link_lost":
+            return EXIT_LINK_LOST
         return 0 if self["converged"] else 1
 
 
-def delay_plan(case: Case) -> dict:
-    loop = loop_latency_steps(CONNECTIONS)
+class _Stop(Exception):
+    def __init__(self, status: str, message: str):
+        super().__init__(message)
+        self.status = status
+
+
+def delay_plan(case: Case, topology: Topology = VIRTUAL) -> dict:
+    """D = one step per connection of the loop (+ the adapter's pipeline step) + the rig's latency."""
+    loop = loop_latency_steps(topology.connections)
+    if topology is HARDWARE:
+        loop += case.values["link"]["pipeline_steps"]
     d = case.delay_steps(loop)
     if d >= case.samples_per_span:
         raise CaseError(f"rig.delay_steps: the delay advance D = {d} steps (loop {loop} + rig "
@@ -56,30 +100,36 @@ def closed_form_reference(case: Case) -> np.ndarray:
     return ss.force_series(case.samples_per_span)
 
 
-MASTERS = ("fmpy", "libcosim")
-
-
 def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str = "fmpy",
-             system: dict | None = None) -> RunResult:
-    """Run a case. `system` (fmus, connections, parameters), e.g. from an SSP file, replaces the build."""
+             system: dict | None = None, hardware: tuple[str, int] | None = None,
+             realtime: bool = False, rt_priority: int | None = 50) -> RunResult:
+    """Run a case. `system` (fmus, connections, parameters), e.g. from an SSP file, replaces the build;
+    `hardware` (host, port) runs against a rig controller through the adapter FMU."""
     if master_kind not in MASTERS:
         raise CaseError(f"--master: must be one of {', '.join(MASTERS)} (got {master_kind!r})")
-    plan = delay_plan(case)  # validates before anything is written
+    if hardware is not None and (system is not None or master_kind != "fmpy"):
+        raise CaseError("--hardware: runs with the fmpy master from a case file only")
+    topology = HARDWARE if hardware is not None else VIRTUAL
+    plan = delay_plan(case, topology)  # validates before anything is written
     n, dt = case.samples_per_span, case.dt_s
     run = case.values["run"]
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     t_build = time.perf_counter()
     if system is None:
-        fmus = build_case_fmus(case, out_dir / "fmus", plan["delay_steps"])
-        connections, parameters = CONNECTIONS, {"catenary": {"delay_steps": plan["delay_steps"]}}
+        fmus = build_case_fmus(case, out_dir / "fmus", plan["delay_steps"], topology.fmus,
+                               hardware or ("127.0.0.1", 47800))
+        connections, parameters = topology.connections, {"catenary": {"delay_steps": plan["delay_steps"]}}
     else:
         fmus, connections, parameters = system["fmus"], system["connections"], system["parameters"]
         plan["delay_steps"] = parameters.get("catenary", {}).get("delay_steps", plan["delay_steps"])
     build_s = time.perf_counter() - t_build
     capacity = run["max_spans"] * n
-    recorder = McapRecorder(out_dir / "run.mcap", MCAP_GROUPS | {"/convergence": {}},
-                            {"case": case.name, "dt_s": dt, "samples_per_span": n, "master": master_kind})
+    pacing_group = {"/master": {"lateness_us": "start of the step after its slot start [us]",
+                                "duration_us": "wall time of the step [us]"}} if realtime else {}
+    recorder = McapRecorder(out_dir / "run.mcap", topology.groups | pacing_group | {"/convergence": {}},
+                            {"case": case.name, "dt_s": dt, "samples_per_span": n, "master": master_kind,
+                             "topology": topology.name, "realtime": realtime})
     try:
         if master_kind == "libcosim":
             from .libcosim_master import LibcosimMaster
@@ -91,67 +141,109 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
         recorder.close()
         raise
     monitor = ConvergenceMonitor(n)
+    pacer = Pacer(dt, capacity) if realtime else None
+    master.pacer = pacer
+    scheduling = set_realtime_priority(rt_priority) if realtime else "normal"  # after the logger is forked
     status, message = "span_limit", f"not converged within run.max_spans = {run['max_spans']} spans"
     f_lim, z_lim = run["force_limit_N"], run["height_limit_m"]
-    cat_z = master.real_outputs["catenary"].index("height_command")
-    rig_f = master.real_outputs["rig"].index("measured_force")
+    cat = master.real_outputs["catenary"]
+    i_z, i_f = cat.index("height_command"), cat.index("force_at_sample")
+    link_col = master.int_outputs["adapter"].index("link_state") if hardware is not None else None
     bar = tqdm(total=run["max_spans"], unit="span", disable=None if progress else True, leave=False, desc=case.name)
     t_start = time.perf_counter()
     try:
+        if hardware is not None and _link_state_now(master) == LINK_FAULT:
+            raise _Stop("link_lost", f"the rig at {hardware[0]}:{hardware[1]} did not answer the session start")
+        if pacer is not None:
+            pacer.start()
         for span in range(run["max_spans"]):
             for _ in range(n):
+                k = master.k
+                if pacer is not None:
+                    pacer.wait(k)
                 master.step()
-                f = master.values["rig"][rig_f]
-                z = master.values["catenary"][cat_z]
-                if not (abs(f) <= f_lim and abs(z) <= z_lim):  # also catches NaN
-                    raise _Diverged(f"diverged at t = {master.k * dt:.3f} s (span {span}): force {f:.4g} N, "
-                                    f"height {z:.4g} m beyond run.force_limit_N / run.height_limit_m")
+                if pacer is not None:
+                    pacer.done(k)
+                out = master.values["catenary"]
+                if not (abs(out[i_f]) <= f_lim and abs(out[i_z]) <= z_lim):  # also catches NaN
+                    raise _Stop("diverged", f"diverged at t = {master.k * dt:.3f} s (span {span}): force "
+                                            f"{out[i_f]:.4g} N, height {out[i_z]:.4g} m beyond run.force_limit_N / "
+                                            f"run.height_limit_m")
+                if link_col is not None and master.record_int["adapter"][k, link_col] == LINK_FAULT:
+                    raise _Stop("link_lost", f"link to the rig lost at t = {master.k * dt:.3f} s: more than "
+                                             f"{case.values['link']['tolerated_losses']} consecutive answers missing; "
+                                             f"last position held")
             start = span * n
-            _log_span(recorder, master, start, start + n, dt)
-            rec = monitor.close_span(span, master.input_column("catenary", "rig", "measured_force", start, start + n))
+            _log_span(recorder, master, topology, start, start + n, dt)
+            rec = monitor.close_span(span, master.column("catenary", "force_at_sample", start, start + n))
             recorder.write_event("/convergence", (start + n) * dt, rec)
             bar.update(1)
-            bar.set_postfix(change=f"{rec['change']:.2e}", std=f"{rec['std_N']:.2f}")
+            bar.set_postfix(change=f"{rec['change']:.2e}", mean=f"{rec['mean_N']:.1f}", std=f"{rec['std_N']:.2f}")
             if start >= case.ramp_steps and span >= 2 and rec["change"] <= run["convergence_tol"]:
                 status, message = "converged", f"converged after {span + 1} spans"
                 break
-    except _Diverged as exc:
-        status, message = "diverged", str(exc)
-        done = (master.k // n) * n
-        _log_span(recorder, master, done, master.k, dt)
+    except _Stop as stop:
+        status, message = stop.status, str(stop)
+        _log_span(recorder, master, topology, (master.k // n) * n, master.k, dt)
     except KeyboardInterrupt:
         status, message = "interrupted", f"interrupted at t = {master.k * dt:.3f} s"
-        _log_span(recorder, master, (master.k // n) * n, master.k, dt)
+        _log_span(recorder, master, topology, (master.k // n) * n, master.k, dt)
     finally:
         wall = time.perf_counter() - t_start
+        if pacer is not None:
+            pacer.stop()
         bar.close()
         recorder.close()
         per_step = master.per_step_us()
         master.close()
-    return _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, build_s, per_step, master_kind)
+    extra = {"topology": topology.name}
+    if pacer is not None:
+        extra["realtime"] = {**pacer.summary(), "scheduling": scheduling}
+        set_realtime_priority(None)
+        _back_to_normal()
+    if hardware is not None:
+        last = max(master.k - 1, 0)
+        extra["link"] = {c: int(master.record_int["adapter"][last, master.int_outputs["adapter"].index(c)])
+                         for c in LINK_COUNTERS}
+        extra["link"]["rig"] = f"{hardware[0]}:{hardware[1]}"
+        extra["link"]["rig_latency_steps"] = int(master.record_int["adapter"][last, master.int_outputs["adapter"].index("rig_latency_steps")])
+    return _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, build_s, per_step,
+                   master_kind, extra)
 
 
-class _Diverged(Exception):
-    pass
+def _back_to_normal() -> None:
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except (OSError, AttributeError):
+        pass
 
 
-def _log_span(recorder: McapRecorder, master: JacobiMaster, start: int, stop: int, dt: float) -> None:
+def _link_state_now(master) -> int:
+    """The adapter's link state right after initialisation (before any step)."""
+    return int(master.instances["adapter"].get_values(["link_state"])["link_state"])
+
+
+def _log_span(recorder: McapRecorder, master, topology: Topology, start: int, stop: int, dt: float) -> None:
     if stop <= start:
         return
     t = np.arange(start, stop) * dt
-    for topic, fields in MCAP_GROUPS.items():
+    pacer = getattr(master, "pacer", None)
+    if pacer is not None:
+        recorder.write_block("/master", t, np.column_stack([pacer.lateness_ns[start:stop] / 1e3,
+                                                            pacer.duration_ns[start:stop] / 1e3]))
+    for topic, fields in topology.groups.items():
         fmu = topic.strip("/")
         cols = []
         for name in fields:
-            if fmu == "catenary" and name == "contact_force":
-                cols.append(master.input_column("catenary", "rig", "measured_force", start, stop))
+            if name in master.input_names.get(fmu, []):
+                cols.append(master.record_in[fmu][start:stop, master.input_names[fmu].index(name)])
             else:
                 cols.append(master.column(fmu, name, start, stop))
         recorder.write_block(topic, t, np.column_stack(cols))
 
 
 def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, build_s, per_step,
-            master_kind) -> RunResult:
+            master_kind, extra) -> RunResult:
     n, dt = case.samples_per_span, case.dt_s
     spans_done = master.k // n
     summary = {
@@ -171,15 +263,16 @@ def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, b
                 "ramp_steps": case.ramp_steps, "delay_compensation": case.delay_compensation, **plan},
         "timing": {"wall_s": wall, "build_s": build_s, "simulated_s": master.k * dt,
                    "realtime_factor": master.k * dt / wall if wall > 0 else math.inf, "per_step_us": per_step},
+        **extra,
         "fmus": [str(p) for p in fmus.values()],
         "convergence": monitor.history,
     }
     if spans_done >= 1:
-        last = slice((spans_done - 1) * n, spans_done * n)
-        f = master.input_column("catenary", "rig", "measured_force", last.start, last.stop)
-        z = master.column("catenary", "height_at_sample", last.start, last.stop)
-        z0 = master.column("catenary", "profile_at_sample", last.start, last.stop)
-        labels = master.column("catenary", "sample_index", last.start, last.stop)
+        start, stop = (spans_done - 1) * n, spans_done * n
+        f = master.column("catenary", "force_at_sample", start, stop)
+        z = master.column("catenary", "height_at_sample", start, stop)
+        z0 = master.column("catenary", "profile_at_sample", start, stop)
+        labels = master.column("catenary", "sample_index", start, stop)
         assert np.array_equal(labels, np.arange(n)), "catenary sample labels out of step with the master"
         filtered = lowpass_periodic(f, dt, 20.0)
         summary["contact_force"] = {**force_statistics(f), "filtered_20hz": force_statistics(filtered)}
@@ -189,7 +282,7 @@ def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, b
                                 "std_N": float(np.std(ref)), "rms_error_N": err,
                                 "rms_error_rel_std": err / max(float(np.std(ref)), 1e-12)}
         report.write_steady_span(out_dir / "steady_span.csv", np.arange(n) * dt, z0, z, f)
-        overlay = [master.input_column("catenary", "rig", "measured_force", s * n, (s + 1) * n)
+        overlay = [master.column("catenary", "force_at_sample", s * n, (s + 1) * n)
                    for s in range(max(0, spans_done - 10), spans_done)]
         report.plot_contact_force(out_dir / "contact_force.png", dt, overlay, ref, filtered,
                                   f"{case.name}: {case.speed_kmh:.0f} km/h, {status} after {spans_done} spans")

@@ -6,13 +6,17 @@ finishes it by itself if the run's process dies, so a run that stops early stays
 """
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import multiprocessing as mp
+import os
 from pathlib import Path
 
 import numpy as np
 from mcap.writer import Writer
+
+from .pacing import background_priority
 
 
 def _schema(title: str, fields: dict[str, str]) -> bytes:
@@ -74,7 +78,11 @@ class McapWriter:
                 self._fh.close()
 
 
+PIPE_BYTES = 1 << 20  # a span of samples fits: handing it over never blocks the stepping loop
+
+
 def _writer_process(conn, path: str, groups: dict, metadata: dict | None) -> None:
+    background_priority()  # the stepping loop and a rig emulator on this machine come first
     writer = McapWriter(Path(path), groups, metadata)
     try:
         while True:
@@ -103,6 +111,10 @@ class McapRecorder:
     def __init__(self, path: Path, groups: dict[str, dict[str, str]], metadata: dict[str, str] | None = None):
         ctx = mp.get_context("fork")
         recv, self._send = ctx.Pipe(duplex=False)
+        try:
+            fcntl.fcntl(self._send.fileno(), fcntl.F_SETPIPE_SZ, PIPE_BYTES)
+        except (OSError, AttributeError):
+            pass  # the default pipe size only makes logging block a little longer
         self._proc = ctx.Process(target=_writer_process, args=(recv, str(path), groups, metadata),
                                  name="pantohil-mcap", daemon=False)
         self._proc.start()

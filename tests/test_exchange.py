@@ -61,6 +61,9 @@ def test_osp_system_structure_runs_in_libcosim(ssp, default_run):
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimObserver import CosimObserver
 
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+
+    log_output_level(CosimLogLevel.WARNING)
     ex = CosimExecution.from_osp_config_file(str(ssp.parent / "asm_250_osp"))
     obs = CosimObserver.create_last_value()
     ex.add_observer(obs)

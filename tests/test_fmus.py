@@ -1,4 +1,4 @@
-"""The three FMUs: clean fmpy validation, units and descriptions on every variable (issue 2
+"""The four FMUs: clean fmpy validation, units and descriptions on every variable (issue 2
 acceptance 3, issue 8 acceptance 3); the libcosim run is in test_exchange.py."""
 import zipfile
 import xml.etree.ElementTree as ET
@@ -17,8 +17,8 @@ def built(tmp_path_factory):
     return {p.stem: p for p in out.glob("*.fmu")}
 
 
-def test_three_fmus_validate_clean(built):
-    assert set(built) == {"catenary", "rig", "pantograph"}
+def test_every_fmu_validates_clean(built):
+    assert set(built) == {"catenary", "rig", "pantograph", "adapter"}
     for path in built.values():
         assert validate_fmu(str(path)) == []
 

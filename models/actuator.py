@@ -1,0 +1,52 @@
+"""Actuator motion limits: a command never leaves the stroke, the velocity or the acceleration limit.
+
+LinMot PS10-70x240U (Paper D sec. 2): 5.4 m/s and 1650 N; the acceleration limit is the force limit
+over the moving mass. The limiter clips the stroke and ramps the rest, one sample at a time.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class ActuatorLimits:
+    stroke_min_m: float = -0.12
+    stroke_max_m: float = 0.12
+    max_velocity_m_s: float = 5.4
+    max_acceleration_m_s2: float = 300.0  # ~1650 N over a 5.5 kg slider and pantograph head
+
+    def __post_init__(self):
+        if not self.stroke_min_m < self.stroke_max_m:
+            raise ValueError("actuator stroke: the minimum must be below the maximum")
+        if self.max_velocity_m_s <= 0 or self.max_acceleration_m_s2 <= 0:
+            raise ValueError("actuator limits: velocity and acceleration must be > 0")
+
+
+class Limiter:
+    """Turns wanted heights into feasible ones; counts the samples it had to change."""
+
+    def __init__(self, limits: ActuatorLimits, dt_s: float, z0: float = 0.0):
+        self.lim = limits
+        self.dt = dt_s
+        self.z = min(max(z0, limits.stroke_min_m), limits.stroke_max_m)
+        self.v = 0.0
+        self.limited = 0
+
+    def __call__(self, wanted: float) -> tuple[float, float]:
+        lim, dt = self.lim, self.dt
+        target = min(max(wanted, lim.stroke_min_m), lim.stroke_max_m)
+        v = (target - self.z) / dt
+        dv = lim.max_acceleration_m_s2 * dt
+        v = min(max(v, self.v - dv), self.v + dv)
+        v = min(max(v, -lim.max_velocity_m_s), lim.max_velocity_m_s)
+        # braking: the velocity towards an end must let the actuator stop before it (discrete bound)
+        a = lim.max_acceleration_m_s2
+        brake = lambda d: max(0.0, ((2 * a * d + (a * dt / 2) ** 2) ** 0.5 - a * dt / 2))
+        v = min(v, max(brake(lim.stroke_max_m - self.z - v * dt), self.v - dv))
+        v = max(v, min(-brake(self.z + v * dt - lim.stroke_min_m), self.v + dv))
+        z = min(max(self.z + v * dt, lim.stroke_min_m), lim.stroke_max_m)  # a safety net only
+        v = (z - self.z) / dt
+        if abs(z - wanted) > 1e-12:
+            self.limited += 1
+        self.z, self.v = z, v
+        return z, v
