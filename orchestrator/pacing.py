@@ -9,8 +9,9 @@ import time
 
 import numpy as np
 
-SPIN_S = 0.0001  # spin (not sleep) for the last 0.1 ms: sleep wakes up ~60 us late; spinning longer starves
-                 # a rig emulator or logger sharing the machine
+SPIN_S = 0.0001  # spin (not sleep) for the last 0.1 ms: sleep wakes up ~60 us late. Spinning much longer
+                 # starves a rig emulator or logger on the machine, and under SCHED_FIFO it runs into the
+                 # kernel's RT throttling (95 % per second: a 50 ms stall every second, measured)
 
 
 def set_realtime_priority(priority: int | None) -> str:
