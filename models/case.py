@@ -16,7 +16,7 @@ import numpy as np
 from .asm import AsmParameters, receptance_direct
 from .hil import UPDATES, HilSettings
 from .pantograph import PantographParameters
-from .profile import DropperProfile, ProfileError, read_profile_csv
+from .profile import DropperProfile, ProfileError, TabulatedProfile, read_profile_csv
 from .receptance import harmonic_count
 from .rig import RigParameters
 
@@ -50,6 +50,7 @@ SCHEMA = {
     },
     "catenary": {
         "model": (str, "asm", lambda s: s in ("asm",), "must be \"asm\"", "catenary model"),
+        "definition_file": (str, "", None, "", "catenary file (relative to the case): ASM2 fitted to its FE model"),
         "span_m": (float, _REQUIRED, _pos, "must be > 0", "span length [m]"),
         "tension_N": (float, _REQUIRED, _pos, "must be > 0", "contact-wire tension T [N]"),
         "density_kg_m": (float, _REQUIRED, _pos, "must be > 0", "string linear density mu [kg/m]"),
@@ -58,8 +59,9 @@ SCHEMA = {
         "beta_s": (float, 1e-4, _nonneg, "must be >= 0", "Rayleigh beta [s]"),
     },
     "profile": {
-        "source": (str, "droppers", lambda s: s in ("droppers", "csv"), "must be \"droppers\" or \"csv\"",
-                   "where z0 comes from"),
+        "source": (str, "droppers", lambda s: s in ("droppers", "csv", "catenary"),
+                   "must be \"droppers\", \"csv\" or \"catenary\"", "where z0 comes from"),
+        "catenary_file": (str, "", None, "", "catenary file whose form-found z0 to use, relative to the case"),
         "dropper_spacing_m": (list, [], None, "", "intervals support-dropper-...-support [m]"),
         "wire_mass_kg_m": (float, 1.374, _pos, "must be > 0", "contact-wire mass per length [kg/m]"),
         "wire_tension_N": (float, 0.0, _nonneg, "must be >= 0", "tension for the sag (0: catenary.tension_N) [N]"),
@@ -277,8 +279,44 @@ def _check_pantograph(v: dict) -> PantographParameters:
                                 uplift, p["model"], p["gravity_m_s2"])
 
 
+def _analysis(case_path: Path, name: str, key: str):
+    from .catenary_analysis import cached_analysis
+    from .catenary_def import CatenaryError
+
+    try:
+        return cached_analysis(case_path.parent / name)
+    except CatenaryError as exc:
+        raise CaseError(f"{key}: {exc}") from None
+
+
+def _fill_from_definition(raw: dict, source: Path) -> dict:
+    """[catenary] definition_file: take the ASM2 data not given in the case from the file's fit
+    (Paper A sec. 4), and z0 from its form-finding unless [profile] says otherwise."""
+    cat = raw.get("catenary", {})
+    name = cat.get("definition_file")
+    if not name:
+        return raw
+    if not isinstance(name, str):
+        raise CaseError(f"catenary.definition_file: expected a file name, got {name!r}")
+    a = _analysis(source, name, "catenary.definition_file")
+    fitted = {"span_m": a.span_m, "tension_N": a.contact_tension_N, "density_kg_m": a.fitted_density_kg_m,
+              "support_stiffness_N_m2": a.support_stiffness_N_m2, "alpha_1_s": a.alpha_1_s, "beta_s": a.beta_s}
+    out = copy.deepcopy(raw)
+    out["catenary"] = {**fitted, **cat}
+    if "profile" not in raw:
+        out["profile"] = {"source": "catenary", "catenary_file": name}
+    return out
+
+
 def _check_profile(v: dict, case_path: Path):
     pr, span = v["profile"], v["catenary"]["span_m"]
+    if pr["source"] == "catenary":
+        if not pr["catenary_file"]:
+            raise CaseError("profile.catenary_file: required when profile.source = \"catenary\"")
+        a = _analysis(case_path, pr["catenary_file"], "profile.catenary_file")
+        if abs(a.span_m - span) > 1e-9 * span:
+            raise CaseError(f"profile.catenary_file: its span ({a.span_m:g} m) is not catenary.span_m ({span:g} m)")
+        return TabulatedProfile(span, np.array(a.profile_x_m), np.array(a.profile_z_m))
     if pr["source"] == "csv":
         if not pr["csv_file"]:
             raise CaseError("profile.csv_file: required when profile.source = \"csv\"")
@@ -296,7 +334,7 @@ def _check_profile(v: dict, case_path: Path):
 
 
 def build_case(raw: dict, source: Path) -> Case:
-    v = validate(raw)
+    v = validate(_fill_from_definition(raw, source))
     c, run, hil = v["catenary"], v["run"], v["hil"]
     cat = AsmParameters(c["tension_N"], c["density_kg_m"], c["support_stiffness_N_m2"], c["alpha_1_s"], c["beta_s"])
     speed = run["speed_kmh"] / 3.6

@@ -58,6 +58,10 @@ def _parser() -> argparse.ArgumentParser:
     emu.add_argument("--rt-priority", type=int, default=49, metavar="P",
                      help="SCHED_FIFO priority if permitted (0: normal scheduling; default 49)")
 
+    catenary = sub.add_parser("catenary", help="form-finding, stiffness and ASM fit of a catenary file (FE model)")
+    catenary.add_argument("file", type=Path, help="catenary definition (TOML), e.g. models/catenaries/paper_a_stitched.toml")
+    catenary.add_argument("--out", type=Path, required=True, help="folder for catenary.json, CSV files and plots")
+
     build = sub.add_parser("build", help="build and validate the four FMUs of a case (catenary, rig, pantograph, "
                                          "hardware adapter); optionally an SSP file of the virtual HIL system")
     _add_case_args(build, optional=True)
@@ -179,6 +183,26 @@ def _cmd_build(args) -> int:
     return 1 if bad else 0
 
 
+def _cmd_catenary(args) -> int:
+    from pantohil.models.catenary_def import CatenaryError
+    from pantohil.orchestrator.catenary_report import catenary_report
+
+    try:
+        s = catenary_report(args.file, args.out)
+    except CatenaryError as exc:
+        raise CaseError(str(exc)) from None
+    fit = s["asm_fit"]
+    print(f"{s['name']}: {len(s['dropper_lengths_m'])} droppers, lengths {min(s['dropper_lengths_m']):.3f}-"
+          f"{max(s['dropper_lengths_m']):.3f} m, tensions >= {s['min_dropper_tension_N']:.1f} N, height error "
+          f"{s['max_height_error_m'] * 1e3:.2e} mm")
+    print(f"vertical stiffness: mean {s['mean_vertical_stiffness_N_m']:.1f} N/m ({s['min_vertical_stiffness_N_m']:.0f}-"
+          f"{s['max_vertical_stiffness_N_m']:.0f}); ASM fit: kbar {fit['support_stiffness_N_m2']:.2f} N/m^2, "
+          + ", ".join(f"mu({b['band_hz'][0]:g}-{b['band_hz'][1]:g} Hz) {b['density_kg_m']:.4f}" for b in fit["bands"])
+          + " kg/m")
+    print(f"written to {args.out} in {s['elapsed_s']:.1f} s")
+    return 0
+
+
 def _cmd_package(args) -> int:
     import shutil
 
@@ -223,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _terminate)
     args = _parser().parse_args(argv)
     handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
-               "rig-emulator": _cmd_emulator}[args.command]
+               "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary}[args.command]
     try:
         return handler(args)
     except CaseError as exc:

@@ -1,0 +1,107 @@
+"""`pantohil catenary FILE --out DIR`: form-finding, stiffness map and ASM fit of a catenary file, as
+catenary.json, profile.csv, stiffness.csv, droppers.csv, geometry.png and stiffness.png."""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import time
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from pantohil.models.catenary_analysis import CatenaryAnalysis, analyse  # noqa: E402
+from pantohil.models.catenary_def import load_definition  # noqa: E402
+from pantohil.models.fe_catenary import form_find  # noqa: E402
+
+
+def _write_csv(path: Path, header: list[str], rows) -> None:
+    tmp = path.with_suffix(".csv.part")
+    with tmp.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+    os.replace(tmp, path)
+
+
+def _geometry_plot(path: Path, cat, ff) -> None:
+    """One span of wires and droppers, heights exaggerated (Paper D Fig. 8 style)."""
+    sec, L, mid = ff.section, cat.span_m, ff.section.n_spans // 2
+    sel = (sec.x >= mid * L - 1e-9) & (sec.x <= (mid + 1) * L + 1e-9)
+    x = sec.x[sel] - mid * L
+    fig, ax = plt.subplots(figsize=(10, 4))
+    ax.plot(x, ff.heights[sec.cw_w[sel]], color="tab:red", lw=1.5, label="contact wire")
+    ax.plot(x, ff.heights[sec.mw_w[sel]], color="tab:blue", lw=1.5, label="messenger wire")
+    for xs, wd in zip(sec.stitch_x, sec.stitch_w):
+        xl = xs - mid * L
+        keep = (xl >= -1e-9) & (xl <= L + 1e-9)
+        if keep.any():
+            ax.plot(xl[keep], ff.heights[wd[keep]], color="tab:green", lw=1.2, label="stitch wire")
+    for xd, cw, up, _ in sec.droppers:
+        if mid * L < xd < (mid + 1) * L:
+            ax.plot([xd - mid * L] * 2, [ff.heights[cw], ff.heights[up]], color="0.4", lw=0.8)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("height above the contact wire at the supports [m]")
+    ax.set_title(f"{cat.name}: one span (droppers grey)")
+    handles, labels = ax.get_legend_handles_labels()
+    ax.legend(dict(zip(labels, handles)).values(), dict(zip(labels, handles)).keys(), fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _stiffness_plot(path: Path, a: CatenaryAnalysis) -> None:
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7))
+    ax1.plot(a.stiffness_x_m, a.stiffness_N_m, color="tab:blue")
+    ax1.axhline(a.mean_stiffness_N_m, ls="--", color="tab:red", lw=1, label=f"mean {a.mean_stiffness_N_m:.0f} N/m")
+    for xd in a.dropper_positions_m:
+        ax1.axvline(xd, color="0.8", lw=0.8)
+    ax1.set_xlabel("x in the central span [m]")
+    ax1.set_ylabel("vertical stiffness k_z [N/m]")
+    ax1.set_title(f"{a.name}: contact-wire stiffness (Paper A Fig. 7 style; droppers grey)")
+    ax1.legend(fontsize=8)
+    ax1.grid(alpha=0.3)
+    f = np.array(a.wave_frequencies_hz)
+    lam = np.array(a.wavelengths_m)
+    ok = np.array(a.propagating)
+    ax2.plot(f[ok], lam[ok], "o", ms=4, label="FE, propagating")
+    ax2.plot(f[~ok], lam[~ok], "x", ms=5, color="0.5", label="FE, stop band (not fitted)")
+    from pantohil.models.asm import AsmParameters, wavelength_at_rest
+
+    fine = np.linspace(f.min(), f.max(), 200)
+    p = AsmParameters(a.contact_tension_N, a.fitted_density_kg_m, a.support_stiffness_N_m2, a.alpha_1_s, a.beta_s)
+    ax2.plot(fine, [wavelength_at_rest(p, 2 * np.pi * x) for x in fine], color="tab:red",
+             label=f"ASM2, mu = {a.fitted_density_kg_m:.4f} kg/m (10-40 Hz fit)")
+    ax2.set_xlabel("frequency [Hz]")
+    ax2.set_ylabel("wavelength [m]")
+    ax2.set_title("wavelength under a fixed harmonic force (Paper A Fig. 10 style)")
+    ax2.legend(fontsize=8)
+    ax2.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def catenary_report(path: Path, out_dir: Path) -> dict:
+    t0 = time.perf_counter()
+    cat = load_definition(path)
+    a = analyse(cat)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = {**a.summary(), "source": str(path), "elapsed_s": time.perf_counter() - t0}
+    _write_csv(out_dir / "profile.csv", ["x_m", "z0_m"], ((f"{x:.4f}", f"{z:.9e}") for x, z in zip(a.profile_x_m, a.profile_z_m)))
+    _write_csv(out_dir / "stiffness.csv", ["x_m", "kz_N_m"], ((f"{x:.4f}", f"{k:.3f}") for x, k in zip(a.stiffness_x_m, a.stiffness_N_m)))
+    _write_csv(out_dir / "droppers.csv", ["dropper", "x_m", "length_m", "tension_N"],
+               ((i + 1, f"{x:.4f}", f"{L:.6f}", f"{T:.3f}") for i, (x, L, T) in
+                enumerate(zip(a.dropper_positions_m, a.dropper_lengths_m, a.dropper_tensions_N))))
+    _geometry_plot(out_dir / "geometry.png", cat, form_find(cat, 3))
+    _stiffness_plot(out_dir / "stiffness.png", a)
+    tmp = out_dir / "catenary.json.part"
+    tmp.write_text(json.dumps(summary, indent=2) + "\n")
+    os.replace(tmp, out_dir / "catenary.json")
+    return summary
