@@ -26,7 +26,7 @@ from pantohil.models.profile import write_profile_csv
 
 from .system import FMU_NAMES, loop_latency_steps
 
-BUILDER_VERSION = "8"
+BUILDER_VERSION = "9"
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}

@@ -82,7 +82,10 @@ class PantohilAdapter(Fmi2Slave):
         """Start a session: the rig resets and answers with its status (latency in steps)."""
         hello = proto.encode(proto.Message(proto.HELLO, 0, 0, a=self.time_step))
         for _ in range(10):
-            self._sock.sendto(hello, self._peer)
+            try:
+                self._sock.sendto(hello, self._peer)
+            except OSError:  # unreachable or unresolvable rig: a link fault, reported by link_state
+                break
             msg = self._receive(time.perf_counter() + 0.2, lambda m: m.type == proto.STATUS)
             if msg is not None:
                 self.rig_latency_steps = int(round(msg.a))

@@ -18,6 +18,8 @@ from pantohil.models.catenary_analysis import CatenaryAnalysis, analyse  # noqa:
 from pantohil.models.catenary_def import load_definition  # noqa: E402
 from pantohil.models.fe_catenary import form_find  # noqa: E402
 
+from .report import save_figure  # noqa: E402
+
 
 def _write_csv(path: Path, header: list[str], rows) -> None:
     tmp = path.with_suffix(".csv.part")
@@ -50,9 +52,7 @@ def _geometry_plot(path: Path, cat, ff) -> None:
     handles, labels = ax.get_legend_handles_labels()
     ax.legend(dict(zip(labels, handles)).values(), dict(zip(labels, handles)).keys(), fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def _stiffness_plot(path: Path, a: CatenaryAnalysis) -> None:
@@ -82,9 +82,7 @@ def _stiffness_plot(path: Path, a: CatenaryAnalysis) -> None:
     ax2.set_title("wavelength under a fixed harmonic force (Paper A Fig. 10 style)")
     ax2.legend(fontsize=8)
     ax2.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def catenary_report(path: Path, out_dir: Path) -> dict:

@@ -106,10 +106,15 @@ def _cmd_run(args) -> int:
     if args.hardware is not None:
         from pantohil.fmus.udp_protocol import parse_endpoint
 
+        import socket
+
         try:
             hardware = parse_endpoint(args.hardware)
+            socket.getaddrinfo(hardware[0], hardware[1], socket.AF_INET, socket.SOCK_DGRAM)
         except ValueError as exc:
             raise CaseError(f"--hardware: {exc}") from None
+        except OSError as exc:
+            raise CaseError(f"--hardware: cannot resolve {hardware[0]!r} ({exc.strerror})") from None
     out = args.out or Path("runs") / f"{case.name}-{datetime.now():%Y%m%d-%H%M%S}"
     result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system,
                       hardware=hardware, realtime=args.realtime, rt_priority=args.rt_priority)
@@ -253,6 +258,15 @@ def main(argv: list[str] | None = None) -> int:
     except CaseError as exc:
         print(f"pantohil: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except Exception as exc:  # an FMU or master failure: one line, the run folder keeps what was written
+        from fmpy.fmi1 import FMICallException
+
+        from pantohil.orchestrator.fmu_runtime import FmuError
+
+        if isinstance(exc, (FMICallException, FmuError)):
+            print(f"pantohil: error: an FMU failed: {exc}", file=sys.stderr)
+            return 1
+        raise
 
 
 if __name__ == "__main__":

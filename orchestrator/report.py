@@ -28,6 +28,15 @@ def _clean(obj):
     return obj
 
 
+def save_figure(fig, path: Path) -> None:
+    """Lay out, write atomically (PNG, 120 dpi) and free a figure."""
+    fig.tight_layout()
+    tmp = path.with_name(path.name + ".part")
+    fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
 def write_json_atomic(path: Path, data: dict) -> None:
     tmp = path.with_suffix(path.suffix + ".part")
     tmp.write_text(json.dumps(_clean(data), indent=2) + "\n")
@@ -58,9 +67,7 @@ def plot_contact_force(path: Path, dt: float, spans: list[np.ndarray], reference
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def plot_convergence(path: Path, history: list[dict], tol: float, title: str) -> None:
@@ -79,6 +86,4 @@ def plot_convergence(path: Path, history: list[dict], tol: float, title: str) ->
     ax2.set_ylabel("contact force [N]")
     ax2.grid(alpha=0.3)
     ax2.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path)
