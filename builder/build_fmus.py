@@ -26,7 +26,7 @@ from pantohil.models.profile import write_profile_csv
 
 from .system import FMU_NAMES, loop_latency_steps
 
-BUILDER_VERSION = "9"
+BUILDER_VERSION = "10"
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}
@@ -54,6 +54,8 @@ def fmu_parameters(case: Case, delay_steps: int, rig_address: tuple[str, int] = 
             "max_frequency": case.values["hil"]["max_frequency_hz"],
             "update_strategy": ("step", "span").index(case.hil_update), "relaxation": case.relaxation,
             "ramp_steps": case.ramp_steps, "delay_steps": delay_steps,
+            "catenary_model": 1 if case.model == "pfem" else 0, "droppers": int(case.values["pfem"]["droppers"]),
+            "dropper_relaxation": case.values["pfem"]["dropper_relaxation"],
         },
         "pantograph": {
             "model": 1 if pan.model == "rigid_mass" else 0, "n_masses": n,
@@ -100,6 +102,12 @@ def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
     if name == "catenary":
         write_profile_csv(stage / "profile.csv", case.profile)
         files.append(stage / "profile.csv")
+        if case.model == "pfem":
+            from .operators import case_operators  # here, not at the top: operators uses this module's cache_root
+
+            op = case_operators(case)
+            shutil.copy2(op.path, stage / "operators.npz")
+            files.append(stage / "operators.npz")
     return files
 
 

@@ -1,5 +1,7 @@
-"""Periodic catenary FMU (ASM2): receives the measured contact force, runs the HIL iteration and
-commands the contact-point height, advanced by the delay D (Paper B sec. 3, Paper D sec. 3)."""
+"""Periodic catenary FMU: receives the measured contact force, runs the HIL iteration and commands the
+contact-point height, advanced by the delay D (Paper B sec. 3, Paper D sec. 3). Two catenary models:
+ASM2, the analytical string (Papers A-B), and the PFEM, one span of a finite-element catenary with
+periodic boundaries and dropper slackening (Papers C-D), whose operators it carries in its resources."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,10 +12,14 @@ from pythonfmu import Fmi2Slave
 from pantohil.fmus.fmu_support import Var, register_all
 from pantohil.models.asm import AsmParameters
 from pantohil.models.hil import UPDATES, HilSettings, PeriodicHil
+from pantohil.models.operator_file import load_operators
+from pantohil.models.pfem_hil import PfemHil
 from pantohil.models.profile import read_profile_csv
 from pantohil.models.receptance import asm_operator, harmonic_count, reduce_harmonics
 
 PROFILE_FILE = "profile.csv"
+OPERATOR_FILE = "operators.npz"
+MAX_DROPPERS = 12
 
 VARIABLES = [
     Var("span_length", "real", "parameter", "m", "Span length L", 65.0, 1.0, 1000.0),
@@ -30,6 +36,9 @@ VARIABLES = [
     Var("relaxation", "real", "parameter", "1", "Relaxation mu_c (Paper D eq. 10)", 0.1, 0.0, 1.0),
     Var("ramp_steps", "integer", "parameter", "1", "Initial ramp N_r in steps (0: none)", 0, 0),
     Var("delay_steps", "integer", "parameter", "1", "Delay advance D in steps: the loop latency to compensate", 1, 0),
+    Var("catenary_model", "integer", "parameter", "1", "0: ASM2 (Papers A-B), 1: PFEM from resources/operators.npz (Papers C-D)", 0, 0, 1),
+    Var("droppers", "integer", "parameter", "1", "PFEM: 1 dropper slackening (Paper C sec. 5), 0 linear catenary", 1, 0, 1),
+    Var("dropper_relaxation", "real", "parameter", "1", "PFEM: relaxation of the dropper corrections mu_d (Paper D sec. 3.7)", 1.0, 0.0, 1.0),
     Var("contact_force", "real", "input", "N", "Measured contact force (pushing the wire up is positive); NaN: not measured", 0.0),
     Var("height_command", "real", "output", "m", "Contact-point height commanded D samples ahead", 0.0),
     Var("sample_index", "integer", "output", "1", "Label n of the force just received, 0..N-1 in the span", 0),
@@ -38,12 +47,17 @@ VARIABLES = [
     Var("profile_at_sample", "real", "output", "m", "Static wire height z0 (unfiltered) at sample_index", 0.0),
     Var("force_at_sample", "real", "output", "N", "Force in use at sample_index: the measured one, or the previous span's if it was not measured (NaN input)", 0.0),
     Var("harmonics", "integer", "output", "1", "Harmonics kept N_h (0..N_h-1)", 0),
+    Var("slack_droppers", "integer", "output", "1", "PFEM: droppers corrected at this step (slack)", 0),
+    *[Var(f"dropper_correction_{d + 1}", "real", "output", "N",
+          f"PFEM: correction force of dropper {d + 1} at this step's instant of its window (Paper C eq. 39); 0 if absent", 0.0)
+      for d in range(MAX_DROPPERS)],
 ]
 
 
 class PantohilCatenary(Fmi2Slave):
     author = "pantohil"
-    description = ("Periodic catenary (ASM2 analytical string, Gil et al. Papers A-B) for steady-state HIL "
+    description = ("Periodic catenary (ASM2 analytical string, Gil et al. Papers A-B, or PFEM with dropper "
+                   "slackening, Papers C-D) for steady-state HIL "
                    "pantograph tests: valid for the steady state of equal spans only.")
 
     def __init__(self, **kwargs):
@@ -53,13 +67,25 @@ class PantohilCatenary(Fmi2Slave):
 
     def exit_initialization_mode(self):
         n = int(self.samples_per_span)
-        cat = AsmParameters(self.tension, self.density, self.support_stiffness, self.alpha, self.beta)
         self.harmonics = harmonic_count(self.max_frequency, n, self.time_step)
-        x = np.arange(n) * self.speed * self.time_step
-        self._z0 = read_profile_csv(Path(self.resources) / PROFILE_FILE, self.span_length).heights(x)
-        op = asm_operator(cat, self.speed, n, self.time_step, self.harmonics)
         settings = HilSettings(UPDATES[self.update_strategy], self.relaxation, self.delay_steps, self.ramp_steps)
-        self._hil = PeriodicHil(op, reduce_harmonics(self._z0, self.harmonics), settings)
+        if self.catenary_model == 1:
+            ops = load_operators(Path(self.resources) / OPERATOR_FILE)
+            s = ops.settings
+            if s.samples_per_span != n or abs(s.dt_s - self.time_step) > 1e-12 or s.n_harmonics != self.harmonics:
+                raise ValueError(f"{OPERATOR_FILE} was built for N = {s.samples_per_span}, dt = {s.dt_s}, N_h = "
+                                 f"{s.n_harmonics}; the parameters give N = {n}, dt = {self.time_step}, N_h = {self.harmonics}")
+            if ops.n_droppers > MAX_DROPPERS:
+                raise ValueError(f"the PFEM block has {ops.n_droppers} droppers; this FMU reports at most {MAX_DROPPERS}")
+            self._z0 = ops.z0
+            self._hil = PfemHil(ops, settings, self.dropper_relaxation, bool(self.droppers))
+        else:
+            cat = AsmParameters(self.tension, self.density, self.support_stiffness, self.alpha, self.beta)
+            x = np.arange(n) * self.speed * self.time_step
+            self._z0 = read_profile_csv(Path(self.resources) / PROFILE_FILE, self.span_length).heights(x)
+            op = asm_operator(cat, self.speed, n, self.time_step, self.harmonics)
+            self._hil = PeriodicHil(op, reduce_harmonics(self._z0, self.harmonics), settings)
+        self._pfem = self.catenary_model == 1
         self.height_command = 0.0 if self.ramp_steps > 0 else self._hil.current_height(self.delay_steps % n)
 
     def do_step(self, current_time, step_size):
@@ -70,4 +96,9 @@ class PantohilCatenary(Fmi2Slave):
         self.height_at_sample = hil.current_height(label)
         self.profile_at_sample = float(self._z0[label])
         self.force_at_sample = float(hil.last_force[label])
+        if self._pfem and hil.nd:
+            corr = hil.current_correction
+            for d in range(len(corr)):
+                setattr(self, f"dropper_correction_{d + 1}", float(corr[d]))
+            self.slack_droppers = int(np.count_nonzero(corr))
         return True

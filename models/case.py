@@ -49,8 +49,9 @@ SCHEMA = {
         "description": (str, "", None, "", "free text"),
     },
     "catenary": {
-        "model": (str, "asm", lambda s: s in ("asm",), "must be \"asm\"", "catenary model"),
-        "definition_file": (str, "", None, "", "catenary file (relative to the case): ASM2 fitted to its FE model"),
+        "model": (str, "asm", lambda s: s in ("asm", "pfem"), "must be \"asm\" or \"pfem\"", "catenary model"),
+        "definition_file": (str, "", None, "", "catenary file (relative to the case): ASM2 fitted to its FE model, "
+                            "or the span of the PFEM"),
         "span_m": (float, _REQUIRED, _pos, "must be > 0", "span length [m]"),
         "tension_N": (float, _REQUIRED, _pos, "must be > 0", "contact-wire tension T [N]"),
         "density_kg_m": (float, _REQUIRED, _pos, "must be > 0", "string linear density mu [kg/m]"),
@@ -108,6 +109,14 @@ SCHEMA = {
         "ramp_steps": (int, 0, _nonneg, "must be >= 0", "initial ramp N_r [steps]"),
         "delay_compensation": (bool, True, None, "", "advance the height by the rig's latency"),
         "delay_steps": (int, -1, None, "", "override the delay advance D; omit to compute it [steps]"),
+    },
+    "pfem": {
+        "droppers": (bool, True, None, "", "dropper slackening (Paper C sec. 5); false: the linear catenary"),
+        "dropper_max_frequency_hz": (float, 20.0, _pos, "must be > 0", "f_max of the elongations, N_hd [Hz]"),
+        "dropper_relaxation": (float, 1.0, _unit, "must be in (0, 1]", "mu_d [-]"),
+        "omega_max_rad_s": (float, 750.0, _pos, "must be > 0", "highest frequency of the transform [rad/s]"),
+        "grid_resolution": (float, 0.094, _pos, "must be > 0", "frequency step / (alpha + beta w^2) [-]"),
+        "taper": (float, 0.25, lambda x: 0 <= x < 1, "must be in [0, 1)", "tapered top fraction of [0, w_max] [-]"),
     },
     "run": {
         "speed_kmh": (float, _REQUIRED, _pos, "must be > 0", "pantograph speed [km/h]"),
@@ -222,6 +231,17 @@ class Case:
     ramp_steps: int
     delay_compensation: bool
     delay_override: int
+    model: str = "asm"
+    definition_path: Path | None = None
+
+    def pfem_settings(self):
+        """The discretisation of this case's PFEM operators (Paper C sec. 3, Paper D sec. 3.5/3.7)."""
+        from .pfem_operators import PfemSettings
+
+        p = self.values["pfem"]
+        return PfemSettings(self.speed_m_s, self.dt_s, self.samples_per_span, self.n_harmonics,
+                            harmonic_count(p["dropper_max_frequency_hz"], self.samples_per_span, self.dt_s),
+                            p["omega_max_rad_s"], "graded", p["grid_resolution"], taper=p["taper"])
 
     @property
     def speed_kmh(self) -> float:
@@ -361,9 +381,23 @@ def build_case(raw: dict, source: Path) -> Case:
     if not act["stroke_min_m"] < act["stroke_max_m"]:
         raise CaseError(f"actuator.stroke_max_m: must be above actuator.stroke_min_m ({act['stroke_min_m']:g} m)")
     profile = _check_profile(v, source)
+    model, definition = c["model"], None
+    if model == "pfem":
+        if not c["definition_file"]:
+            raise CaseError("catenary.definition_file: required when catenary.model = \"pfem\" (the span to model)")
+        definition = (source.parent / c["definition_file"]).resolve()
+        _analysis(source, c["definition_file"], "catenary.definition_file")  # a readable, form-findable file
+        from .catenary_def import load_definition
+
+        if load_definition(definition).stitch is not None:
+            raise CaseError("catenary.definition_file: a PFEM block of a stitched catenary is not supported yet "
+                            "(its stitch wire crosses the block boundary)")
+        if v["pfem"]["omega_max_rad_s"] > math.pi / dt:
+            raise CaseError(f"pfem.omega_max_rad_s: {v['pfem']['omega_max_rad_s']:g} rad/s is above the Nyquist "
+                            f"frequency pi/dt = {math.pi / dt:.1f} rad/s")
     return Case(v["case"]["name"], source, v, cat, pan, rig, profile, speed, span, n, dt,
                 harmonic_count(hil["max_frequency_hz"], n, dt), hil["update"], hil["relaxation"],
-                hil["ramp_steps"], hil["delay_compensation"], hil["delay_steps"])
+                hil["ramp_steps"], hil["delay_compensation"], hil["delay_steps"], model, definition)
 
 
 def load_case(path: Path | None = None, overrides: list[str] | None = None) -> Case:

@@ -55,11 +55,15 @@ class CatenaryDefinition:
     beta_s: float
     mesh_size_m: float
     values: dict
+    presag_span: str = "supports"  # the pre-sag parabola runs between the "supports" or the "end_droppers"
 
     def design_height(self, x: np.ndarray) -> np.ndarray:
-        """Design contact-wire height: the pre-sag parabola, 0 at the supports (negative down)."""
+        """Design contact-wire height (negative down): the pre-sag parabola, 0 at the supports, or 0 at the
+        first and last droppers and level with the supports outside them."""
         x = np.asarray(x, dtype=float)
-        return -4.0 * self.presag_m * x * (self.span_m - x) / self.span_m**2
+        a, b = (0.0, self.span_m) if self.presag_span == "supports" else (self.dropper_positions_m[0],
+                                                                           self.dropper_positions_m[-1])
+        return -4.0 * self.presag_m * np.clip(x - a, 0, None) * np.clip(b - x, 0, None) / (b - a) ** 2
 
     def on_stitch(self, x: float) -> bool:
         """Does the dropper at x (within the span) hang from the stitch wire rather than the messenger?"""
@@ -70,7 +74,7 @@ class CatenaryDefinition:
 
 
 _SCHEMA = {
-    "catenary": {"name", "description", "span_m", "encumbrance_m", "contact_height_m", "presag_m",
+    "catenary": {"name", "description", "span_m", "encumbrance_m", "contact_height_m", "presag_m", "presag_between",
                  "dropper_spacing_m", "dropper_positions_m", "mesh_size_m", "alpha_1_s", "beta_s"},
     "contact_wire": {"tension_N", "density_kg_m3", "area_m2", "linear_mass_kg_m", "youngs_modulus_Pa",
                      "second_moment_m4", "bending_stiffness_N_m2"},
@@ -114,6 +118,13 @@ def _wire(raw: dict, sec: str) -> Wire:
     else:
         ei = _num(s, sec, "youngs_modulus_Pa", 0.0, nonneg=True) * _num(s, sec, "second_moment_m4", 0.0, nonneg=True)
     return Wire(tension, mass, ei)
+
+
+def _presag_span(c: dict) -> str:
+    v = c.get("presag_between", "supports")
+    if v not in ("supports", "end_droppers"):
+        raise CatenaryError(f"catenary.presag_between: must be \"supports\" or \"end_droppers\" (got {v!r})")
+    return v
 
 
 def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinition:
@@ -177,6 +188,7 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
         name=str(c.get("name", source.stem if source else "catenary")), source=source, span_m=span,
         encumbrance_m=_num(c, "catenary", "encumbrance_m", positive=True),
         presag_m=_num(c, "catenary", "presag_m", 0.0), dropper_positions_m=positions,
+        presag_span=_presag_span(c),
         contact=_wire(raw, "contact_wire"), messenger=_wire(raw, "messenger_wire"), stitch=stitch,
         stitch_length_m=stitch_len, dropper_mass_kg_m=dmass, dropper_axial_stiffness_N=ea,
         clamp_mass_messenger_kg=_num(d, "droppers", "clamp_mass_messenger_kg", 0.0, nonneg=True),

@@ -116,6 +116,11 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     t_build = time.perf_counter()
+    operators = None
+    if system is None and case.model == "pfem":
+        from pantohil.builder.operators import case_operators
+
+        operators = case_operators(case, progress).summary()
     if system is None:
         fmus = build_case_fmus(case, out_dir / "fmus", plan["delay_steps"], topology.fmus,
                                hardware or ("127.0.0.1", 47800))
@@ -197,6 +202,8 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
         per_step = master.per_step_us()
         master.close()
     extra = {"topology": topology.name}
+    if operators is not None:
+        extra["operators"] = operators
     if pacer is not None:
         extra["realtime"] = {**pacer.summary(), "scheduling": scheduling}
         set_realtime_priority(None)
@@ -242,6 +249,23 @@ def _log_span(recorder: McapRecorder, master, topology: Topology, start: int, st
         recorder.write_block(topic, t, np.column_stack(cols))
 
 
+def case_dropper_positions(case: Case) -> list:
+    from pantohil.models.catenary_def import load_definition
+
+    return [float(x) for x in load_definition(case.definition_path).dropper_positions_m]
+
+
+def _catenary_summary(case: Case) -> dict:
+    if case.model == "pfem":
+        p = case.values["pfem"]
+        s = case.pfem_settings()
+        return {"model": "pfem", "span_m": case.span_m, "definition_file": str(case.definition_path),
+                "droppers_slacken": p["droppers"], "dropper_relaxation": p["dropper_relaxation"],
+                "dropper_harmonics": s.n_harmonics_dropper, "omega_max_rad_s": s.omega_max,
+                "grid_resolution": s.resolution, "taper": s.taper}
+    return {"model": "asm", "span_m": case.span_m, **asdict(case.catenary)}
+
+
 def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, build_s, per_step,
             master_kind, extra) -> RunResult:
     n, dt = case.samples_per_span, case.dt_s
@@ -250,7 +274,7 @@ def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, b
         "case": case.name, "master": master_kind, "status": status, "message": message,
         "converged": status == "converged", "diverged": status == "diverged",
         "spans": spans_done, "samples_per_span": n, "dt_s": dt, "speed_kmh": case.speed_kmh,
-        "catenary": {"model": "asm", "span_m": case.span_m, **asdict(case.catenary)},
+        "catenary": _catenary_summary(case),
         "pantograph": {"model": case.pantograph.model, "masses_kg": list(case.pantograph.masses_kg),
                        "stiffnesses_N_m": list(case.pantograph.stiffnesses_N_m),
                        "dampings_Ns_m": list(case.pantograph.dampings_Ns_m),
@@ -276,11 +300,23 @@ def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, b
         assert np.array_equal(labels, np.arange(n)), "catenary sample labels out of step with the master"
         filtered = lowpass_periodic(f, dt, 20.0)
         summary["contact_force"] = {**force_statistics(f), "filtered_20hz": force_statistics(filtered)}
-        ref = closed_form_reference(case)
-        err = rms((f - f.mean()) - (ref - ref.mean()))
-        summary["reference"] = {"model": "asm closed form (Paper A eqs. 38-41), same harmonics",
-                                "std_N": float(np.std(ref)), "rms_error_N": err,
-                                "rms_error_rel_std": err / max(float(np.std(ref)), 1e-12)}
+        ref = None
+        if case.model == "asm":
+            ref = closed_form_reference(case)
+            err = rms((f - f.mean()) - (ref - ref.mean()))
+            summary["reference"] = {"model": "asm closed form (Paper A eqs. 38-41), same harmonics",
+                                    "std_N": float(np.std(ref)), "rms_error_N": err,
+                                    "rms_error_rel_std": err / max(float(np.std(ref)), 1e-12)}
+        elif case.values["pfem"]["droppers"]:
+            names = [v for v in master.real_outputs["catenary"] if v.startswith("dropper_correction_")]
+            corr = np.column_stack([master.column("catenary", v, start, stop) for v in names])
+            n_d = int(len(case_dropper_positions(case)))
+            corr = corr[:, :n_d]
+            summary["droppers"] = {"slack_steps": [int(c) for c in np.count_nonzero(corr > 0, axis=0)],
+                                   "max_correction_N": [float(c) for c in corr.max(axis=0)],
+                                   "positions_m": case_dropper_positions(case)}
+            report.plot_dropper_corrections(out_dir / "dropper_corrections.png", dt, corr,
+                                            f"{case.name}: dropper correction forces, converged span")
         report.write_steady_span(out_dir / "steady_span.csv", np.arange(n) * dt, z0, z, f)
         overlay = [master.column("catenary", "force_at_sample", s * n, (s + 1) * n)
                    for s in range(max(0, spans_done - 10), spans_done)]

@@ -87,3 +87,33 @@ def plot_convergence(path: Path, history: list[dict], tol: float, title: str) ->
     ax2.grid(alpha=0.3)
     ax2.legend(fontsize=8)
     save_figure(fig, path)
+
+
+def plot_dropper_corrections(path: Path, dt: float, corrections: np.ndarray, title: str) -> None:
+    """Dropper correction forces over the converged span, one curve per dropper (Paper C Fig. 8 style).
+    Each column holds dropper d's correction at the instant of its window that every step visits."""
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    t = np.arange(corrections.shape[0]) * dt
+    for d in range(corrections.shape[1]):
+        if np.any(corrections[:, d] > 0):
+            ax.plot(t, corrections[:, d], lw=1.0, label=f"dropper {d + 1}")
+    ax.set_xlabel("time in span [s] (pantograph position / speed)")
+    ax.set_ylabel("correction force [N]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="best", fontsize=8)
+    save_figure(fig, path)
+
+
+def plot_force_comparison(path: Path, dt: float, forces: dict, title: str) -> None:
+    """Contact force over one span of several runs, overlaid."""
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for label, f in forces.items():
+        ax.plot(np.arange(len(f)) * dt, f, lw=1.1, label=label)
+    ax.set_xlabel("time in span [s]")
+    ax.set_ylabel("contact force [N]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    save_figure(fig, path)

@@ -1,0 +1,70 @@
+"""Build, cache and locate the PFEM operators of a case (Paper C sec. 3, Paper D sec. 3).
+
+The cache key hashes everything the operators depend on: the catenary file, the model sources that
+compute them, the discretisation settings and the file format. A build in progress writes to a
+temporary name, so an interrupted build leaves no entry behind.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from pantohil.models import catenary_def, fe_catenary, operator_file, pfem, pfem_blocks, pfem_operators
+from pantohil.models.case import Case
+from pantohil.models.catenary_def import load_definition
+from pantohil.models.operator_file import FORMAT_VERSION, load_operators, save_operators
+from pantohil.models.pfem_blocks import catenary_block
+from pantohil.models.pfem_operators import build_operators
+
+from .build_fmus import cache_root
+
+SOURCES = (pfem, pfem_blocks, pfem_operators, fe_catenary, catenary_def, operator_file)
+
+
+@dataclass
+class OperatorBuild:
+    path: Path
+    cached: bool
+    build_s: float
+    n_frequencies: int
+    bytes: int
+    key: str
+
+    def summary(self) -> dict:
+        return {"build_s": self.build_s, "cached": self.cached, "n_frequencies": self.n_frequencies,
+                "bytes": self.bytes, "file": str(self.path), "key": self.key}
+
+
+def operator_key(case: Case) -> str:
+    h = hashlib.sha256(f"pantohil operators v{FORMAT_VERSION}".encode())
+    h.update(Path(case.definition_path).read_bytes())
+    for module in SOURCES:
+        h.update(Path(module.__file__).read_bytes())
+    h.update(json.dumps(asdict(case.pfem_settings()), sort_keys=True).encode())
+    return h.hexdigest()[:24]
+
+
+def case_operators(case: Case, progress: bool = True) -> OperatorBuild:
+    """The operators of a PFEM case, from the cache or built now (and cached)."""
+    key = operator_key(case)
+    path = cache_root() / "operators" / f"{key}.npz"
+    t0 = time.perf_counter()
+    if path.exists():
+        ops = load_operators(path, key)  # refuses a corrupt or mismatched entry with one line
+        return OperatorBuild(path, True, time.perf_counter() - t0, int(ops.info.get("n_frequencies", 0)),
+                             path.stat().st_size, key)
+    cb = catenary_block(load_definition(case.definition_path))
+    with tqdm(total=1, unit="freq", desc="PFEM operators", disable=None if progress else True, leave=False) as bar:
+        def tick(done, total):
+            bar.total = total
+            bar.n = done
+            bar.refresh()
+
+        ops = build_operators(cb, case.pfem_settings(), progress=tick)
+    size = save_operators(ops, path, key)
+    return OperatorBuild(path, False, time.perf_counter() - t0, ops.info["n_frequencies"], size, key)
