@@ -51,7 +51,8 @@ def register_all(slave, variables: list[Var]) -> None:
     given = load_parameters(slave.resources)
     for var in variables:
         value = given.get(var.name, var.start) if var.causality == "parameter" else var.start
-        setattr(slave, var.name, {"real": float, "integer": int, "boolean": bool, "string": str}[var.kind](value))
+        if not isinstance(getattr(type(slave), var.name, None), property):  # a property computes its value
+            setattr(slave, var.name, {"real": float, "integer": int, "boolean": bool, "string": str}[var.kind](value))
         causality = getattr(Fmi2Causality, var.causality)
         desc = f"{var.description} [{var.unit}]" if var.unit != "1" else var.description
         if var.causality == "parameter":

@@ -62,8 +62,9 @@ class PantohilCatenary(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        register_all(self, VARIABLES)
         self._hil = None
+        self._pfem = False
+        register_all(self, VARIABLES)
 
     def exit_initialization_mode(self):
         n = int(self.samples_per_span)
@@ -86,19 +87,54 @@ class PantohilCatenary(Fmi2Slave):
             op = asm_operator(cat, self.speed, n, self.time_step, self.harmonics)
             self._hil = PeriodicHil(op, reduce_harmonics(self._z0, self.harmonics), settings)
         self._pfem = self.catenary_model == 1
+        self._label = 0
         self.height_command = 0.0 if self.ramp_steps > 0 else self._hil.current_height(self.delay_steps % n)
 
     def do_step(self, current_time, step_size):
         hil = self._hil
-        label, span = hil.sample, hil.span
+        self._label = hil.k % hil.n
         self.height_command = hil.step(self.contact_force)
-        self.sample_index, self.span_index = label, span
-        self.height_at_sample = hil.current_height(label)
-        self.profile_at_sample = float(self._z0[label])
-        self.force_at_sample = float(hil.last_force[label])
-        if self._pfem and hil.nd:
-            corr = hil.current_correction
-            for d in range(len(corr)):
-                setattr(self, f"dropper_correction_{d + 1}", float(corr[d]))
-            self.slack_droppers = int(np.count_nonzero(corr))
         return True
+
+    # Per-step outputs other than the command are read from the iteration's state when a master asks
+    # for them, so that do_step does only the work of the loop.
+    _label = 0
+
+    @property
+    def sample_index(self) -> int:
+        return self._label
+
+    @property
+    def span_index(self) -> int:
+        return 0 if self._hil is None else max(self._hil.k - 1, 0) // self._hil.n
+
+    @property
+    def height_at_sample(self) -> float:
+        return 0.0 if self._hil is None else float(self._hil.z[self._label])
+
+    @property
+    def profile_at_sample(self) -> float:
+        return 0.0 if self._hil is None else float(self._z0[self._label])
+
+    @property
+    def force_at_sample(self) -> float:
+        return 0.0 if self._hil is None else float(self._hil.last_force[self._label])
+
+    @property
+    def slack_droppers(self) -> int:
+        return int(np.count_nonzero(self._dropper_forces()))
+
+    def _dropper_forces(self) -> np.ndarray:
+        hil = self._hil
+        return hil.current_correction if (self._hil is not None and self._pfem and hil.nd) else np.zeros(0)
+
+
+def _dropper_output(d: int) -> property:
+    def get(self) -> float:
+        f = self._dropper_forces()
+        return float(f[d]) if d < len(f) else 0.0
+    return property(get)
+
+
+for _d in range(MAX_DROPPERS):
+    setattr(PantohilCatenary, f"dropper_correction_{_d + 1}", _dropper_output(_d))

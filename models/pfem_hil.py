@@ -43,11 +43,16 @@ class PfemHil:
             a[-1] = 1.0
         theta = 2 * np.pi * np.outer(np.arange(n), np.arange(jd)) / n
         self._basis = np.concatenate([a * np.cos(theta), -a * np.sin(theta)], axis=1) / n  # irfft row i
-        self.correction = np.zeros((ops.n_droppers, n))  # f_d in use, by window index
         self.f0 = ops.dropper_tension_N
         self.kd = ops.dropper_stiffness_N_m
         self.win = ops.window_start
         self._d = np.arange(ops.n_droppers)
+        # everything a step needs, by the phase n_bar of the step (each dropper has one instant per phase)
+        self._window_index = (np.arange(n)[:, None] - self.win[None, :]) % n  # [n_bar, d]
+        self._basis_at = self._basis[self._window_index]  # [n_bar, d, j]
+        self._dd_at = self._dd[self._d[None, :], self._window_index] if ops.n_droppers else self._dd  # [n_bar, d, e, j]
+        self.correction_at = np.zeros((n, ops.n_droppers))  # f_d in use, by the phase of its instant
+        self._slack_below = -self.f0 / self.kd if ops.n_droppers else self.f0
         self.current_correction = np.zeros(ops.n_droppers)  # at this step's instant, per dropper
 
     @property
@@ -86,30 +91,43 @@ class PfemHil:
             command *= self.k / self.s.ramp_steps
         return float(command)
 
-    def elongation_at(self, window_index: np.ndarray) -> np.ndarray:
-        """Frequency-reduced elongation of every dropper at a window index each."""
-        return np.einsum("dj,dj->d", self._basis[window_index], self.elongation)
+    @property
+    def correction(self) -> np.ndarray:
+        """Correction forces in use by dropper and window index."""
+        out = np.zeros((self.ops.n_droppers, self.n))
+        out[self._d[None, :], self._window_index] = self.correction_at
+        return out
 
     def _correct(self, n_bar: int) -> None:
         """Eqs. (38)-(40) at each dropper's instant of phase n_bar, then eqs. (36)-(37)."""
-        i = (n_bar - self.win) % self.n
-        B = self._basis[i]  # [d, j]
+        B = self._basis_at[n_bar]  # [d, j]
         dl = np.einsum("dj,dj->d", B, self.elongation)
-        old = self.correction[self._d, i]
-        slack = self.kd * dl < -self.f0  # eq. (38)
+        old = self.correction_at[n_bar]
+        self.current_correction = old  # a view: updated in place below
+        slack = dl < self._slack_below  # eq. (38): k_d dL < -f_d0
         active = np.flatnonzero(slack | (old != 0.0))
-        if not len(active):
-            self.current_correction = old
+        if len(active) == 1:  # the common case, without the small linear algebra
+            a = active[0]
+            col = self._dd_at[n_bar, a]  # [observed e, j]
+            new = 0.0
+            if slack[a]:
+                daa = col[a] @ B[a]
+                new = (-self.f0[a] - self.kd[a] * (dl[a] - daa * old[a])) / (1.0 + self.kd[a] * daa)
+            change = self.mu_d * (new - old[a])
+            old[a] += change
+            self.z += change * self.ops.cd[n_bar, a]
+            self.elongation += change * col
             return
-        ia = i[active]
-        cols = self._dd[active, ia]  # [active loaded d, observed e, j]
+        if not len(active):
+            return
+        cols = self._dd_at[n_bar, active]  # [active loaded d, observed e, j]
         old_a = old[active]
         new = np.zeros(len(active))
         s = np.flatnonzero(slack[active])
         if len(s):
             rows = active[s]
             # D[r, a]: elongation of slack dropper r per unit correction of active dropper a
-            D = (cols[:, rows, :] * B[rows][None]).sum(axis=2).T
+            D = np.einsum("aej,ej->ea", cols[:, rows], B[rows])
             ks = self.kd[rows]
             rhs = -self.f0[rows] - ks * (dl[rows] - D @ old_a)
             if len(s) == 1:
@@ -117,7 +135,6 @@ class PfemHil:
             else:
                 new[s] = np.linalg.solve(np.eye(len(s)) + ks[:, None] * D[:, s], rhs)  # eq. (40)
         change = self.mu_d * (new - old_a)
-        self.correction[active, ia] += change
-        self.current_correction = self.correction[self._d, i]
+        old[active] += change  # a view: correction_at[n_bar]
         self.z += change @ self.ops.cd[n_bar, active]  # eq. (36)
         self.elongation += (change @ cols.reshape(len(active), -1)).reshape(self.elongation.shape)  # eq. (37)

@@ -14,6 +14,7 @@ from datetime import datetime
 from pathlib import Path
 
 from pantohil.models.case import CaseError, load_case
+from pantohil.models.operator_file import OperatorFileError
 
 EXIT_BAD_INPUT = 2
 
@@ -74,6 +75,11 @@ def _parser() -> argparse.ArgumentParser:
     package.add_argument("--out", type=Path, required=True, help="package folder (must not exist or be empty)")
     package.add_argument("--zip", action="store_true", help="also write OUT.zip")
     package.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    example = sub.add_parser("example", help="reproduce a worked example of the thesis")
+    example.add_argument("name", choices=["paper-c-appendix"],
+                         help="paper-c-appendix: the academic periodic string of Paper C, Appendix A")
+    example.add_argument("--out", type=Path, required=True, help="folder for summary.json and a plot")
 
     direct = sub.add_parser("direct", help="closed-form ASM steady state of a case (Paper A)")
     _add_case_args(direct, optional=True)
@@ -244,6 +250,21 @@ def _cmd_direct(args) -> int:
     return 0
 
 
+def _cmd_example(args) -> int:
+    from pantohil.models.pfem_example import paper_c_appendix
+    from pantohil.orchestrator.report import plot_force_history, write_json_atomic
+
+    res = paper_c_appendix()
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(args.out / "summary.json", res)
+    plot_force_history(args.out / "contact_force.png", res["force_history_N"], res["contact_points"],
+                       "Paper C Appendix A: contact force of the simulated HIL test (Fig. A.4)")
+    print(f"first forces {', '.join(f'{f:.4f}' for f in res['first_forces_N'][:2])} N; steady force "
+          f"{' '.join(f'{f:.4f}' for f in res['steady_force_N'])} N after {res['blocks_to_converge']} blocks")
+    print(f"written to {args.out}")
+    return 0
+
+
 def _terminate(signum, frame):
     raise KeyboardInterrupt  # a run closes its log and writes its summary, as on Ctrl-C
 
@@ -252,10 +273,13 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _terminate)
     args = _parser().parse_args(argv)
     handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
-               "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary}[args.command]
+               "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary, "example": _cmd_example}[args.command]
     try:
         return handler(args)
     except CaseError as exc:
+        print(f"pantohil: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OperatorFileError as exc:
         print(f"pantohil: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except Exception as exc:  # an FMU or master failure: one line, the run folder keeps what was written

@@ -114,13 +114,13 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     n, dt = case.samples_per_span, case.dt_s
     run = case.values["run"]
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    t_build = time.perf_counter()
     operators = None
-    if system is None and case.model == "pfem":
+    if system is None and case.model == "pfem":  # before the run folder: a bad operator file leaves nothing
         from pantohil.builder.operators import case_operators
 
         operators = case_operators(case, progress).summary()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t_build = time.perf_counter()
     if system is None:
         fmus = build_case_fmus(case, out_dir / "fmus", plan["delay_steps"], topology.fmus,
                                hardware or ("127.0.0.1", 47800))

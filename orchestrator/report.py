@@ -117,3 +117,17 @@ def plot_force_comparison(path: Path, dt: float, forces: dict, title: str) -> No
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     save_figure(fig, path)
+
+
+def plot_force_history(path: Path, forces: list, per_block: int, title: str) -> None:
+    """Contact force step by step, blocks marked (Paper C Fig. A.4 style)."""
+    fig, ax = plt.subplots(figsize=(9, 4))
+    k = np.arange(1, len(forces) + 1)
+    ax.plot(k, forces, "o-", ms=2.5, lw=0.8)
+    for b in range(per_block, len(forces), per_block):
+        ax.axvline(b + 0.5, color="0.85", lw=0.6)
+    ax.set_xlabel("step")
+    ax.set_ylabel("contact force [N]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    save_figure(fig, path)

@@ -1,0 +1,99 @@
+"""PFEM budgets (issue 4 acceptance 4): operator build time of the benchmark-like case (limit 180 s on this
+2-core machine; the thesis reports about 30 min), load from the cache (limit 2 s), and the catenary FMU's
+do_step with droppers (limit 50 us median; the thesis reports 0.15 ms). Also writes the contact force of
+the nonlinear (dropper slackening) and linear runs overlaid. Prints medians; not a timed test.
+
+    python tests/benchmarks/bench_pfem.py [--builds 1] [--loads 5] [--out runs/bench_pfem]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+CASE = ROOT / "models" / "cases" / "pfem_benchmark_250.toml"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--builds", type=int, default=1, help="cold builds of the operators")
+    ap.add_argument("--loads", type=int, default=5, help="loads from the cache")
+    ap.add_argument("--spans", type=int, default=10, help="converged spans replayed through the FMU")
+    ap.add_argument("--out", type=Path, default=ROOT / "runs" / "bench_pfem")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        os.environ["PANTOHIL_CACHE"] = str(Path(tmp) / "cache")
+        from pantohil.builder import operators as ob
+        from pantohil.models.case import load_case
+        from pantohil.models.operator_file import load_operators
+
+        case = load_case(CASE)
+        builds = []
+        for i in range(args.builds):
+            for f in (Path(tmp) / "cache" / "operators").glob("*.npz") if (Path(tmp) / "cache").exists() else []:
+                f.unlink()
+            b = ob.case_operators(case, progress=False)
+            builds.append(b.build_s)
+        loads = []
+        for _ in range(args.loads):
+            t0 = time.perf_counter()
+            b = ob.case_operators(case, progress=False)
+            loads.append(time.perf_counter() - t0)
+        ops = load_operators(b.path)
+        print(f"benchmark-like case: N = {case.samples_per_span}, {ops.n_droppers} droppers, "
+              f"{b.n_frequencies} frequencies, {ops.info.get('modes', '?')} modes, file {b.bytes / 1e6:.1f} MB")
+        print(f"operator build:   median {statistics.median(builds):.1f} s over {len(builds)} (limit 180 s)")
+        print(f"load from cache:  median {statistics.median(loads):.2f} s over {len(loads)} (limit 2 s)")
+
+        from pantohil.orchestrator.hil_run import run_case
+        from pantohil.orchestrator.report import plot_force_comparison
+
+        args.out.mkdir(parents=True, exist_ok=True)
+        runs = {}
+        for name, extra in (("dropper slackening", []), ("linear (no slackening)", ["pfem.droppers=false"])):
+            c = load_case(CASE, extra)
+            s = run_case(c, Path(tmp) / name.split()[0], progress=False)
+            span = np.loadtxt(Path(tmp) / name.split()[0] / "steady_span.csv", delimiter=",", skiprows=1)
+            runs[name] = (s, span[:, -1])
+            print(f"{name:<24s} {s['status']} after {s['spans']} spans, std {s['contact_force']['std_N']:.2f} N, "
+                  f"catenary set+doStep+get median {s['timing']['per_step_us']['catenary']:.1f} us")
+        plot_force_comparison(args.out / "pfem_linear_vs_nonlinear.png", case.dt_s,
+                              {k: v[1] for k, v in runs.items()},
+                              "pfem_benchmark_250: converged span, with and without dropper slackening")
+        print(f"plot: {args.out / 'pfem_linear_vs_nonlinear.png'}")
+        force = runs["dropper slackening"][1]
+        print(f"catenary FMU do_step alone, replaying the converged force for {args.spans} spans: "
+              f"median {do_step_median(case, force, args.spans, Path(tmp)):.1f} us (limit 50 us)")
+
+
+def do_step_median(case, force: np.ndarray, spans: int, tmp: Path) -> float:
+    """Time the catenary FMU's doStep alone (fmpy, ctypes), with the converged span's force as input
+    after a warm-up long enough for the dropper corrections to settle."""
+    from pantohil.builder.build_fmus import build_case_fmus, default_delay_steps
+    from pantohil.orchestrator.fmu_runtime import FmuInstance
+
+    fmu = build_case_fmus(case, tmp / "fmus", names=("catenary",))["catenary"]
+    inst = FmuInstance("catenary", fmu)
+    inst.setup(0.0, {"delay_steps": default_delay_steps(case), "ramp_steps": 0})
+    port = inst.port(["contact_force"])
+    n, dt = case.samples_per_span, case.dt_s
+    times = []
+    for s in range(60 + spans):
+        for m in range(n):
+            port.write([force[m]])
+            t0 = time.perf_counter_ns()
+            inst.do_step((s * n + m) * dt, dt)
+            if s >= 60:
+                times.append(time.perf_counter_ns() - t0)
+    inst.close()
+    return float(np.median(times)) / 1000.0
+
+
+if __name__ == "__main__":
+    main()
