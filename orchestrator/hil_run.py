@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -110,6 +110,12 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     if hardware is not None and (system is not None or master_kind != "fmpy"):
         raise CaseError("--hardware: runs with the fmpy master from a case file only")
     topology = HARDWARE if hardware is not None else VIRTUAL
+    if case.model == "pfem" and case.values["pfem"]["droppers"]:  # log the dropper corrections with the catenary
+        extra_fields = {f"dropper_correction_{d + 1}": f"correction force of dropper {d + 1} at this step [N]"
+                        for d in range(len(case_dropper_positions(case)))}
+        extra_fields["slack_droppers"] = "droppers corrected at this step [-]"
+        topology = replace(topology, groups={**topology.groups,
+                                             "/catenary": {**topology.groups["/catenary"], **extra_fields}})
     plan = delay_plan(case, topology)  # validates before anything is written
     n, dt = case.samples_per_span, case.dt_s
     run = case.values["run"]
