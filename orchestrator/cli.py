@@ -76,6 +76,19 @@ def _parser() -> argparse.ArgumentParser:
     package.add_argument("--zip", action="store_true", help="also write OUT.zip")
     package.add_argument("--quiet", action="store_true", help="no progress bar")
 
+    fem = sub.add_parser("fem-sim", help="conventional simulation of a finite section of N spans of the case's catenary "
+                                         "(the reference for the periodic models, Paper C sec. 6)")
+    _add_case_args(fem, optional=False)
+    fem.add_argument("--spans", type=int, required=True, help="number of spans of the section")
+    fem.add_argument("--central", type=int, default=3, help="central spans whose statistics are reported (default 3)")
+    fem.add_argument("--out", type=Path, required=True, help="run folder")
+    fem.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    compare = sub.add_parser("compare", help="contact force of two run folders overlaid (HIL or fem-sim), 20 Hz")
+    compare.add_argument("run_a", type=Path)
+    compare.add_argument("run_b", type=Path)
+    compare.add_argument("--out", type=Path, required=True, help="folder for compare.json and plots")
+
     example = sub.add_parser("example", help="reproduce a worked example of the thesis")
     example.add_argument("name", choices=["paper-c-appendix"],
                          help="paper-c-appendix: the academic periodic string of Paper C, Appendix A")
@@ -250,6 +263,29 @@ def _cmd_direct(args) -> int:
     return 0
 
 
+def _cmd_fem_sim(args) -> int:
+    from pantohil.orchestrator.fem_sim import run_fem_sim
+
+    case = load_case(args.case, args.overrides)
+    s = run_fem_sim(case, args.spans, args.out, args.central, progress=not args.quiet)
+    c = s["contact_force"]
+    print(f"{s['n_spans']} spans, central {s['central_spans']}: mean {c['mean_N']:.2f} N, std {c['std_N']:.2f} N "
+          f"(20 Hz), max {c['max_N']:.1f} N, min {c['min_N']:.1f} N, contact loss {c['contact_loss_pct']:.2f} %; "
+          f"{s['timing']['wall_s']:.1f} s")
+    print(f"run folder: {args.out}")
+    return 0
+
+
+def _cmd_compare(args) -> int:
+    from pantohil.orchestrator.fem_sim import compare_runs
+
+    r = compare_runs(args.run_a, args.run_b, args.out)
+    print(f"std {r['a']['std_N']:.2f} N ({r['a']['label']}) vs {r['b']['std_N']:.2f} N ({r['b']['label']}): "
+          f"{r['std_difference_pct']:+.2f} %; rms difference {r['rms_difference_N']:.2f} N = "
+          f"{r['rms_difference_pct_of_std_b']:.2f} % of the second std")
+    return 0
+
+
 def _cmd_example(args) -> int:
     from pantohil.models.pfem_example import paper_c_appendix
     from pantohil.orchestrator.report import plot_force_history, write_json_atomic
@@ -273,7 +309,8 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _terminate)
     args = _parser().parse_args(argv)
     handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
-               "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary, "example": _cmd_example}[args.command]
+               "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary, "example": _cmd_example,
+               "fem-sim": _cmd_fem_sim, "compare": _cmd_compare}[args.command]
     try:
         return handler(args)
     except CaseError as exc:

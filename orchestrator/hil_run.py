@@ -321,6 +321,8 @@ def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, b
             summary["droppers"] = {"slack_steps": [int(c) for c in np.count_nonzero(corr > 0, axis=0)],
                                    "max_correction_N": [float(c) for c in corr.max(axis=0)],
                                    "positions_m": case_dropper_positions(case)}
+            np.savetxt(out_dir / "dropper_corrections.csv", np.column_stack([np.arange(n) * dt, corr]), delimiter=",",
+                       header="t_s," + ",".join(f"dropper_{d + 1}_N" for d in range(n_d)), comments="", fmt="%.9g")
             report.plot_dropper_corrections(out_dir / "dropper_corrections.png", dt, corr,
                                             f"{case.name}: dropper correction forces, converged span")
         report.write_steady_span(out_dir / "steady_span.csv", np.arange(n) * dt, z0, z, f)

@@ -131,3 +131,33 @@ def plot_force_history(path: Path, forces: list, per_block: int, title: str) -> 
     ax.set_title(title)
     ax.grid(alpha=0.3)
     save_figure(fig, path)
+
+
+def plot_section_force(path: Path, x: np.ndarray, force: np.ndarray, filtered: np.ndarray, span_m: float,
+                       central: list, title: str) -> None:
+    """Contact force along a finite section, central spans shaded."""
+    fig, ax = plt.subplots(figsize=(11, 4.5))
+    ax.plot(x, force, color="0.6", lw=0.5, label="contact force")
+    ax.plot(x, filtered, color="tab:blue", lw=1.0, label="20 Hz low-pass")
+    ax.axvspan(central[0] * span_m, (central[-1] + 1) * span_m, color="tab:orange", alpha=0.12, label="central spans")
+    ax.set_xlabel("pantograph position [m]")
+    ax.set_ylabel("contact force [N]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    save_figure(fig, path)
+
+
+def plot_dropper_comparison(path: Path, a: np.ndarray, b: np.ndarray, label_a: str, label_b: str) -> None:
+    """Dropper correction forces of two runs (columns t_s, dropper 1..n), Paper C Fig. 10 style."""
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for d in range(1, a.shape[1]):
+        if np.any(a[:, d] > 0) or np.any(b[:, d] > 0):
+            line, = ax.plot(a[:, 0], a[:, d], lw=1.1, label=f"dropper {d}: {label_a}")
+            ax.plot(b[:, 0], b[:, d], "--", lw=1.1, color=line.get_color(), label=f"dropper {d}: {label_b}")
+    ax.set_xlabel("time in span [s]")
+    ax.set_ylabel("correction force [N]")
+    ax.grid(alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="best", fontsize=6, ncol=2)
+    save_figure(fig, path)

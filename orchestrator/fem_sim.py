@@ -1,0 +1,175 @@
+"""`pantohil fem-sim`: the conventional finite-section simulation of a case (Paper C sec. 6) and its
+run folder; `pantohil compare`: two runs overlaid."""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy import signal
+
+from pantohil.models.case import Case, CaseError
+from pantohil.models.catenary_def import load_definition
+
+from . import report
+from .recorder import McapRecorder
+
+CUTOFF_HZ = 20.0
+
+
+def lowpass(x: np.ndarray, dt: float, cutoff_hz: float = CUTOFF_HZ) -> np.ndarray:
+    """Zero-phase low-pass (4th-order Butterworth run forwards and backwards)."""
+    b, a = signal.butter(4, cutoff_hz * 2 * dt)
+    return signal.filtfilt(b, a, x)
+
+
+def central_spans(n_spans: int, central: int) -> list[int]:
+    if n_spans < 1:
+        raise CaseError(f"--spans: must be at least 1 (got {n_spans})")
+    if central < 1:
+        raise CaseError(f"--central: must be at least 1 (got {central})")
+    if n_spans < central + 4:
+        raise CaseError(f"--spans: {n_spans} spans leave no central region of {central} spans with 2 spans on "
+                        f"each side (need at least {central + 4})")
+    first = (n_spans - central) // 2
+    return list(range(first, first + central))
+
+
+def force_statistics(f: np.ndarray) -> dict:
+    mean, std = float(np.mean(f)), float(np.std(f))
+    return {"mean_N": mean, "std_N": std, "stat_max_N": mean + 3 * std, "stat_min_N": mean - 3 * std,
+            "max_N": float(np.max(f)), "min_N": float(np.min(f))}
+
+
+def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progress: bool = True) -> dict:
+    from tqdm import tqdm
+
+    from pantohil.models.fe_simulation import simulate_section
+
+    spans = central_spans(n_spans, central)
+    if not case.values["catenary"]["definition_file"]:
+        raise CaseError("catenary.definition_file: the case's catenary has no catenary file to build a section from")
+    path = (case.source.parent / case.values["catenary"]["definition_file"]).resolve()
+    cat = load_definition(path)
+    if cat.stitch is not None:
+        raise CaseError("catenary.definition_file: fem-sim does not model stitch wires yet")
+    if case.pantograph.model != "chain":
+        raise CaseError("pantograph.model: fem-sim needs a pantograph in contact (\"chain\"), not a rigid mass")
+    slacken = case.values["pfem"]["droppers"]
+    n, dt = case.samples_per_span, case.dt_s
+    out_dir = Path(out_dir)
+    with tqdm(total=1, unit="step", desc=f"fem-sim {n_spans} spans", disable=None if progress else True,
+              leave=False) as bar:
+        def tick(k, total):
+            bar.total = total
+            bar.n = k
+            bar.refresh()
+
+        res = simulate_section(cat, case.pantograph, n_spans, case.speed_m_s, dt, slacken, progress=tick,
+                               reference_height_m=case.reference_height_m())
+    out_dir.mkdir(parents=True, exist_ok=True)
+    filtered = lowpass(res.force_N, dt)
+    # sample m of span j is the instant t = (j n + m) dt; result row k is at t = (k + 1) dt
+    sel = np.concatenate([np.arange(j * n - 1, (j + 1) * n - 1) for j in spans])
+    blocks_raw = np.stack([res.force_N[j * n - 1:(j + 1) * n - 1] for j in spans])
+    blocks = np.stack([filtered[j * n - 1:(j + 1) * n - 1] for j in spans])
+    per_span = len(cat.dropper_positions_m)
+    mid = spans[len(spans) // 2]
+    d_mid = slice(mid * per_span, (mid + 1) * per_span)
+    corr_mid = res.dropper_correction_N[mid * n - 1:(mid + 1) * n - 1, d_mid]
+    central_supports = list(range(spans[0], spans[-1] + 2))
+    summary = {
+        "case": case.name, "model": "conventional FE section (HHT, penalty contact, dropper slackening)",
+        "catenary_file": str(path), "catenary_label": _label(cat), "n_spans": n_spans, "central_spans": spans,
+        "speed_kmh": case.speed_kmh, "dt_s": dt, "samples_per_span": n, "droppers_slacken": slacken,
+        "contact_force": {**force_statistics(filtered[sel]), "filter": f"zero-phase {CUTOFF_HZ:g} Hz low-pass",
+                          "contact_loss_pct": float(100 * np.mean(res.force_N[sel] <= 0.0)),
+                          "raw": force_statistics(res.force_N[sel])},
+        "max_support_uplift_m": float(np.max(res.support_uplift_m[sel][:, central_supports])),
+        "droppers": {"slack_steps": [int(c) for c in np.count_nonzero(corr_mid > 0, axis=0)],
+                     "max_correction_N": [float(c) for c in corr_mid.max(axis=0)]},
+        "timing": {"wall_s": res.wall_s, "steps": len(res.force_N), "peak_memory_MB": res.peak_memory_bytes / 1e6},
+        "en50318": "not claimed: the standard's reference model and acceptance ranges were not available",
+    }
+    with open(out_dir / "central_spans.csv", "w") as fh:
+        fh.write(f"span,t_s,f_N,f_lowpass_{CUTOFF_HZ:g}hz_N\n")  # the low-pass is of the whole run (no edge effect)
+        for j, blk, flt in zip(spans, blocks_raw, blocks):
+            for m, (f, ff) in enumerate(zip(blk, flt)):
+                fh.write(f"{j},{m * dt:.6f},{f:.9g},{ff:.9g}\n")
+    np.savetxt(out_dir / "dropper_corrections.csv", np.column_stack([np.arange(n) * dt, corr_mid]), delimiter=",",
+               header="t_s," + ",".join(f"dropper_{d + 1}_N" for d in range(per_span)), comments="", fmt="%.9g")
+    recorder = McapRecorder(out_dir / "run.mcap", {
+        "/pantograph": {"x_m": "pantograph position [m]", "contact_force": "contact force [N]",
+                        "filtered_force": f"{CUTOFF_HZ:g} Hz low-pass [N]"},
+        "/droppers": {f"dropper_{d + 1}": f"force of dropper {d + 1} of the middle central span [N]"
+                      for d in range(per_span)}}, {"case": case.name, "n_spans": n_spans, "dt_s": dt})
+    recorder.write_block("/pantograph", res.t_s, np.column_stack([res.x_m, res.force_N, filtered]))
+    recorder.write_block("/droppers", res.t_s, res.dropper_force_N[:, d_mid].astype(float))
+    recorder.close()
+    report.plot_section_force(out_dir / "force_along_section.png", res.x_m, res.force_N, filtered, cat.span_m,
+                              spans, f"{case.name}: {n_spans}-span section, {case.speed_kmh:.0f} km/h")
+    report.plot_force_comparison(out_dir / "central_spans.png", dt,
+                                 {f"span {j} ({CUTOFF_HZ:g} Hz)": blk for j, blk in zip(spans, blocks)},
+                                 f"{case.name}: central spans overlaid")
+    report.plot_dropper_corrections(out_dir / "dropper_corrections.png", dt, corr_mid,
+                                    f"{case.name}: dropper correction forces, span {mid}")
+    report.write_json_atomic(out_dir / "summary.json", summary)
+    return summary
+
+
+def _label(cat) -> str:
+    text = f"{cat.name} {cat.values.get('catenary', {}).get('description', '')}"
+    return "benchmark-like (reconstructed)" if "benchmark" in text else cat.name
+
+
+def span_force(run: Path) -> tuple[np.ndarray, float, str]:
+    """One span of contact force of a run folder, 20 Hz low-passed: the converged span of a HIL run or
+    the mean of the central spans of a fem-sim run."""
+    run = Path(run)
+    s = json.loads((run / "summary.json").read_text()) if (run / "summary.json").exists() else None
+    if s is None:
+        raise CaseError(f"{run}: not a run folder (no summary.json)")
+    if (run / "central_spans.csv").exists():
+        d = np.loadtxt(run / "central_spans.csv", delimiter=",", skiprows=1, ndmin=2)
+        dt = float(s["dt_s"])
+        spans = [int(j) for j in np.unique(d[:, 0])]
+        filt = np.stack([d[d[:, 0] == j, 3] for j in spans])
+        return filt.mean(axis=0), dt, f"fem-sim {s['n_spans']} spans (mean of spans {spans})"
+    if (run / "steady_span.csv").exists():
+        from pantohil.models.metrics import lowpass_periodic
+
+        d = np.loadtxt(run / "steady_span.csv", delimiter=",", skiprows=1, ndmin=2)
+        dt = float(s["dt_s"])
+        return lowpass_periodic(d[:, -1], dt, CUTOFF_HZ), dt, f"HIL {s['catenary']['model']} ({s['case']})"
+    raise CaseError(f"{run}: neither steady_span.csv nor central_spans.csv")
+
+
+def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
+    fa, dta, la = span_force(a)
+    fb, dtb, lb = span_force(b)
+    if len(fa) != len(fb) or abs(dta - dtb) > 1e-12:
+        raise CaseError(f"compare: the runs are on different grids ({len(fa)} samples of {dta:g} s, "
+                        f"{len(fb)} of {dtb:g} s)")
+    diff = fa - fb
+    std_ref = float(np.std(fb))
+    res = {"a": {"run": str(a), "label": la, **force_statistics(fa)},
+           "b": {"run": str(b), "label": lb, **force_statistics(fb)},
+           "std_difference_pct": 100 * (float(np.std(fa)) - std_ref) / std_ref,
+           "rms_difference_N": float(np.sqrt(np.mean(diff ** 2))),
+           "rms_difference_pct_of_std_b": 100 * float(np.sqrt(np.mean(diff ** 2))) / std_ref,
+           "filter": f"zero-phase {CUTOFF_HZ:g} Hz low-pass"}
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    report.plot_force_comparison(out_dir / "contact_force.png", dta, {la: fa, lb: fb},
+                                 f"contact force, {CUTOFF_HZ:g} Hz: std {np.std(fa):.2f} vs {np.std(fb):.2f} N, "
+                                 f"rms difference {res['rms_difference_N']:.2f} N")
+    ca, cb = (Path(r) / "dropper_corrections.csv" for r in (a, b))
+    if ca.exists() and cb.exists():
+        da = np.loadtxt(ca, delimiter=",", skiprows=1, ndmin=2)
+        db = np.loadtxt(cb, delimiter=",", skiprows=1, ndmin=2)
+        if da.shape == db.shape:
+            res["dropper_correction_max_N"] = {"a": da[:, 1:].max(axis=0).tolist(), "b": db[:, 1:].max(axis=0).tolist()}
+            report.plot_dropper_comparison(out_dir / "dropper_corrections.png", da, db, la, lb)
+    report.write_json_atomic(out_dir / "compare.json", res)
+    return res
