@@ -81,6 +81,27 @@ class _UnitResponses:
         return out
 
 
+@dataclass
+class SectionModel:
+    """A finite section in the form the integrator needs: matrices on the free dofs, the contact line's
+    shape rows and static height at every step, droppers (may be none) and the dofs whose
+    displacement is recorded as support uplift."""
+
+    K: sparse.csr_matrix
+    M: sparse.csr_matrix
+    alpha: float  # Rayleigh
+    beta: float
+    dashpots: np.ndarray | None  # extra diagonal damping (absorbing ends)
+    shapes: sparse.csr_matrix  # [step + 1, dof] contact-line shape rows at x(t_k)
+    z_static: np.ndarray  # [step + 1] static height of the contact line at x(t_k)
+    x_m: np.ndarray  # [step + 1]
+    d_lo: np.ndarray
+    d_up: np.ndarray
+    f0: np.ndarray
+    kd: np.ndarray
+    recorded: np.ndarray  # dofs recorded every step (support uplift)
+
+
 def simulate_section(cat: CatenaryDefinition, pan: PantographParameters, n_spans: int, speed_m_s: float,
                      dt_s: float, droppers_slacken: bool = True, hht: HhtConstants = HhtConstants(),
                      progress=None, absorbing_ends: bool = True, reference_height_m: float | None = None) -> FeSimResult:
@@ -99,40 +120,52 @@ def simulate_section(cat: CatenaryDefinition, pan: PantographParameters, n_spans
     nf = len(free)
     pos = -np.ones(sec.ndof, dtype=int)
     pos[free] = np.arange(nf)
-    K = ff.K.tocsr()[free][:, free]
-    M = ff.M.tocsr()[free][:, free]
-    C = (cat.alpha_1_s * M + cat.beta_s * K).tocsr()
+    dash = None
     if absorbing_ends:
         dash = np.zeros(nf)
         dash[pos[ends]] = np.sqrt(cat.contact.tension_N * cat.contact.mass_kg_m)
+    L = cat.span_m
+    n_steps = int(round(n_spans * L / (speed_m_s * dt_s)))
+    x_all = np.minimum(np.arange(n_steps + 1) * speed_m_s * dt_s, n_spans * L - 1e-9)
+    rows = hermite_shapes(sec.x, x_all, sec.ndof, sec.cw_w).tocsr()
+    model = SectionModel(ff.K.tocsr()[free][:, free], ff.M.tocsr()[free][:, free], cat.alpha_1_s, cat.beta_s, dash,
+                         rows[:, free].tocsr(), rows @ ff.heights, x_all,
+                         pos[np.array([d[1] for d in sec.droppers])], pos[np.array([d[2] for d in sec.droppers])],
+                         ff.dropper_tensions_N, cat.dropper_axial_stiffness_N / ff.dropper_lengths_m,
+                         pos[np.array([s[1] for s in sec.supports])])
+    res = integrate_section(model, pan, dt_s, droppers_slacken, hht, progress, reference_height_m)
+    res.dropper_x_m = np.array([d[0] for d in sec.droppers])
+    res.n_spans, res.span_m = n_spans, L
+    res.wall_s = time.perf_counter() - t0
+    return res
+
+
+def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: float, droppers_slacken: bool = True,
+                      hht: HhtConstants = HhtConstants(), progress=None,
+                      reference_height_m: float | None = None) -> FeSimResult:
+    """HHT time integration of a section with the pantograph in penalty contact and slackening droppers."""
+    t0 = time.perf_counter()
+    K, M = model.K, model.M
+    C = (model.alpha * M + model.beta * K).tocsr()
+    dash = model.dashpots
+    if dash is not None:
         C = (C + sparse.diags(dash)).tocsr()
+    nf = K.shape[0]
     a, b, g, dt = hht.alpha, hht.beta, hht.gamma, dt_s
     solver = _Banded((M + (1 + a) * (g * dt * C + b * dt * dt * K)).tocsr())
     unit = _UnitResponses(solver)
-    # droppers: elongation rows (upper - lower) and their correction loads (+1 lower, -1 upper)
-    d_lo = pos[np.array([d[1] for d in sec.droppers])]
-    d_up = pos[np.array([d[2] for d in sec.droppers])]
+    d_lo, d_up, f0, kd = model.d_lo, model.d_up, model.f0, model.kd
     nd = len(d_lo)
-    f0 = ff.dropper_tensions_N
-    kd = cat.dropper_axial_stiffness_N / ff.dropper_lengths_m
     scale = b * dt * dt * (1 + a)  # displacement per unit new force, through S = A_eff^-1
     G = np.zeros((nf, nd))
-    for j in range(nd):
+    for j in range(nd):  # droppers: correction loads +1 at the lower end, -1 at the upper
         rhs = np.zeros(nf)
         rhs[d_lo[j]], rhs[d_up[j]] = 1.0, -1.0
         G[:, j] = solver.solve(rhs) * scale
     E_dd = G[d_up] - G[d_lo]  # elongation of dropper i per unit correction of dropper j
-    cw_w = pos[sec.cw_w]
-    static_w = ff.heights[sec.cw_w]
-    static_t = ff.heights[sec.cw_w + 1]
-    sup_dofs = pos[np.array([s[1] for s in sec.supports])]
-    # pantograph: its reference height sets where its lowest spring is neutral (the HIL case's, so that
-    # the mean force compares)
-    L = cat.span_m
-    n_steps = int(round(n_spans * L / (speed_m_s * dt)))
-    x_all = np.minimum(np.arange(n_steps + 1) * speed_m_s * dt, n_spans * L - 1e-9)
-    shapes_all = hermite_shapes(sec.x, x_all, sec.ndof, sec.cw_w).tocsr()[:, free].tocsr()
-    z_static = hermite_shapes(sec.x, x_all, sec.ndof, sec.cw_w).tocsr() @ ff.heights
+    sup_dofs = model.recorded
+    shapes_all, z_static, x_all = model.shapes, model.z_static, model.x_m
+    n_steps = len(x_all) - 1
     ref = float(z_static[0]) if reference_height_m is None else reference_height_m
     p = ChainPantograph(pan, dt, ref, hht)
     f_c = p.settle(float(z_static[0]))
@@ -149,13 +182,12 @@ def simulate_section(cat: CatenaryDefinition, pan: PantographParameters, n_spans
     uplift = np.zeros((n_steps, len(sup_dofs)), dtype=np.float32)
     slack = np.zeros(nd, dtype=bool)
     for k in range(n_steps):
-        x_new = x_all[k + 1]
         u_pred = u + dt * v + dt * dt * (0.5 - b) * acc
         v_pred = v + dt * (1 - g) * acc
         # a (C v + K u) - (1 + a)(C v_pred + K u_pred) with C = alpha M + beta K: two products
-        rhs = (K @ (a * (cat.beta_s * v + u) - (1 + a) * (cat.beta_s * v_pred + u_pred))
-               + M @ (cat.alpha_1_s * (a * v - (1 + a) * v_pred)) - a * F_old)
-        if absorbing_ends:
+        rhs = (K @ (a * (model.beta * v + u) - (1 + a) * (model.beta * v_pred + u_pred))
+               + M @ (model.alpha * (a * v - (1 + a) * v_pred)) - a * F_old)
+        if dash is not None:
             rhs += dash * (a * v - (1 + a) * v_pred)
         acc_free = solver.solve(rhs)
         u_free = u_pred + b * dt * dt * acc_free
@@ -233,7 +265,35 @@ def simulate_section(cat: CatenaryDefinition, pan: PantographParameters, n_spans
             progress(k, n_steps)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     return FeSimResult(np.arange(1, n_steps + 1) * dt, x_all[1:], forces, contact, dforce, dcorr, uplift,
-                       np.array([d[0] for d in sec.droppers]), n_spans, L, time.perf_counter() - t0, peak)
+                       np.zeros(0), 0, 0.0, time.perf_counter() - t0, peak)
+
+
+def asm_string_section(asm, span_m: float, n_spans: int, elements_per_span: int, z0, speed_m_s: float,
+                       dt_s: float) -> SectionModel:
+    """ASM2 (Paper A eq. 7) as a finite FE string of n spans: linear elements, tension T, density mu,
+    distributed support kbar, C = alpha M + beta K, ends absorbing (dashpots sqrt(T mu)). `z0(x)` is
+    the static contact-line height, periodic over a span."""
+    from .pfem_blocks import linear_shapes
+
+    ne = n_spans * elements_per_span
+    Le = span_m / elements_per_span
+    n = ne + 1
+    i = np.arange(ne)
+    rows = np.concatenate([i, i, i + 1, i + 1])
+    cols = np.concatenate([i, i + 1, i, i + 1])
+    mk = np.repeat(np.array([2, 1, 1, 2]) / 6.0 * Le, ne)
+    kk = np.repeat(np.array([1, -1, -1, 1]) / Le, ne)
+    M = sparse.csr_matrix((mk * asm.density_kg_m, (rows, cols)), shape=(n, n))
+    K = sparse.csr_matrix((kk * asm.tension_N + mk * asm.support_stiffness_N_m2, (rows, cols)), shape=(n, n))
+    dash = np.zeros(n)
+    dash[[0, -1]] = np.sqrt(asm.tension_N * asm.density_kg_m)
+    n_steps = int(round(n_spans * span_m / (speed_m_s * dt_s)))
+    x = np.minimum(np.arange(n_steps + 1) * speed_m_s * dt_s, n_spans * span_m - 1e-9)
+    shapes = linear_shapes(np.arange(n) * Le, x, n, np.arange(n))
+    supports = np.arange(0, n, elements_per_span)
+    empty = np.zeros(0, dtype=int)
+    return SectionModel(K, M, asm.alpha_1_s, asm.beta_s, dash, shapes, z0(np.mod(x, span_m)), x, empty, empty,
+                        np.zeros(0), np.zeros(0), supports)
 
 
 def _pantograph_force(p: ChainPantograph, z_next: float) -> float:
