@@ -80,12 +80,11 @@ def test_compare_overlays_two_runs(short_run, tmp_path):
 
 
 def test_a_long_fe_string_reproduces_the_asm_closed_form():
-    """ASM2 (the default case's string) as a 60-span finite FE model, the pantograph running over it; its
-    central spans against the closed form of Paper A eqs. 38-41 (harmonics up to 100 Hz), both low-passed
-    at 20 Hz. Measured: std 15.890 vs 15.932 N, RMS difference 4.7 % of the std, so issue 5's 2 % is NOT
-    met; the difference is a lag of about half a sample of the FE model against the closed form (4.2 %
-    one sample earlier), also seen between the PFEM of the same string and the ASM operator. The test
-    keeps what holds (std within 1 %) and that the rest does not grow (RMS below 6 %)."""
+    """Issue 5 acceptance 2: ASM2 (the default case's string) as a long finite FE model (0.05 m elements:
+    the mesh must resolve the moving load's local deflection, a 0.25 m mesh lags by about 0.5 ms and
+    leaves 4.7 %), the pantograph running over it; its central spans against the closed form of Paper A
+    eqs. 38-41 (harmonics up to 100 Hz), both low-passed at 20 Hz: RMS within 2 % of the std. 30 spans
+    here to keep CI short (measured 1.56 %); the 60-span figure is in the issue's note."""
     from pantohil.models.case import load_case
     from pantohil.models.closed_form import one_sided_harmonics, single_pantograph
     from pantohil.models.fe_simulation import asm_string_section, integrate_section
@@ -95,15 +94,14 @@ def test_a_long_fe_string_reproduces_the_asm_closed_form():
 
     case = load_case()
     n, dt = case.samples_per_span, case.dt_s
-    model = asm_string_section(case.catenary, case.span_m, 60, 260, case.profile.heights, case.speed_m_s, dt)
+    model = asm_string_section(case.catenary, case.span_m, 30, 1300, case.profile.heights, case.speed_m_s, dt)
     res = integrate_section(model, case.pantograph, dt, reference_height_m=case.reference_height_m())
     f = lowpass(res.force_N, dt)
-    fe = np.mean([f[j * n - 1:(j + 1) * n - 1] for j in (29, 30, 31)], axis=0)
+    fe = np.mean([f[j * n - 1:(j + 1) * n - 1] for j in (14, 15, 16)], axis=0)
     ss = single_pantograph(case.catenary, case.pantograph, case.speed_m_s, case.span_m,
                            one_sided_harmonics(case.z0_samples()), case.pantograph.uplift_force_N,
                            harmonic_count(100.0, n, dt))
     ref = lowpass_periodic(ss.force_series(n), dt, 20.0)
     rms = np.sqrt(np.mean((fe - ref) ** 2))
-    print(f"FE string 60 spans vs ASM closed form: std {fe.std():.3f} vs {ref.std():.3f} N, rms {rms / ref.std():.4f} of std")
     assert abs(fe.std() - ref.std()) < 0.01 * ref.std()
-    assert rms < 0.06 * ref.std()
+    assert rms < 0.02 * ref.std()
