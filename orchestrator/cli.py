@@ -89,6 +89,22 @@ def _parser() -> argparse.ArgumentParser:
     compare.add_argument("run_b", type=Path)
     compare.add_argument("--out", type=Path, required=True, help="folder for compare.json and plots")
 
+    stab = sub.add_parser("stability", help="spectral radius of the virtual HIL iteration over f_max, contact stiffness "
+                                            "and delay, with the best relaxation (Paper D sec. 4, Figs. 5-7)")
+    _add_case_args(stab, optional=True)
+    stab.add_argument("--update", choices=("step", "span"), help="updating strategy (default: the case's)")
+    stab.add_argument("--fmax", metavar="A:B:N", help="highest frequency of the catenary response [Hz] "
+                      "(A:B:N, A:B:N:log, A,B,C or A; default: the case's)")
+    stab.add_argument("--contact-stiffness", metavar="A:B:N", help="penalty contact stiffness k_c [N/m] "
+                      "(default: the case's)")
+    stab.add_argument("--delay", metavar="A:B:N", help="loop delay D [steps], compensated in full "
+                      "(default: the case's latency and advance)")
+    stab.add_argument("--relaxation", type=float, help="fix mu_c instead of searching the best one")
+    stab.add_argument("--out", type=Path, required=True, help="folder for stability.csv, maps and summary.json")
+    stab.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: a LocalCluster)")
+    stab.add_argument("--workers", type=int, help="LocalCluster worker processes (default: 2)")
+    stab.add_argument("--quiet", action="store_true", help="no progress bar")
+
     example = sub.add_parser("example", help="reproduce a worked example of the thesis")
     example.add_argument("name", choices=["paper-c-appendix"],
                          help="paper-c-appendix: the academic periodic string of Paper C, Appendix A")
@@ -286,6 +302,17 @@ def _cmd_compare(args) -> int:
     return 0
 
 
+def _cmd_stability(args) -> int:
+    from pantohil.orchestrator.stability_run import run_stability
+
+    s = run_stability(args.case, args.overrides, args.out, args.update, args.fmax, args.contact_stiffness, args.delay,
+                      args.relaxation, args.scheduler, args.workers, progress=not args.quiet)
+    print(f"{s['points']} points ({s['update']}), {s['stable_points']} stable, lowest spectral radius "
+          f"{s['min_spectral_radius']:.4f}; {s['timing']['map_s']:.1f} s on {s['workers']} workers")
+    print(f"written to {args.out}")
+    return 0
+
+
 def _cmd_example(args) -> int:
     from pantohil.models.pfem_example import paper_c_appendix
     from pantohil.orchestrator.report import plot_force_history, write_json_atomic
@@ -310,7 +337,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
                "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary, "example": _cmd_example,
-               "fem-sim": _cmd_fem_sim, "compare": _cmd_compare}[args.command]
+               "fem-sim": _cmd_fem_sim, "compare": _cmd_compare, "stability": _cmd_stability}[args.command]
     try:
         return handler(args)
     except CaseError as exc:

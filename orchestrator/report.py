@@ -161,3 +161,82 @@ def plot_dropper_comparison(path: Path, a: np.ndarray, b: np.ndarray, label_a: s
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize=6, ncol=2)
     save_figure(fig, path)
+
+
+def _edges(values: np.ndarray, log: bool) -> np.ndarray:
+    v = np.log(values) if log else values.astype(float)
+    if len(v) == 1:
+        e = np.array([v[0] - 0.5, v[0] + 0.5]) if not log else np.array([v[0] - 0.1, v[0] + 0.1])
+    else:
+        mid = (v[1:] + v[:-1]) / 2
+        e = np.concatenate([[v[0] - (mid[0] - v[0])], mid, [v[-1] + (v[-1] - mid[-1])]])
+    return np.exp(e) if log else e
+
+
+def _is_geometric(values: np.ndarray) -> bool:
+    if len(values) < 3 or np.any(values <= 0):
+        return False
+    r = values[1:] / values[:-1]
+    return bool(np.allclose(r, r[0], rtol=1e-6) and not np.allclose(np.diff(values), values[1] - values[0], rtol=1e-6))
+
+
+def plot_stability_maps(out: Path, rows: list[dict], pantograph, update: str, case_name: str) -> list[str]:
+    """Paper D Figs. 5-7: spectral radius (unstable region blank) and the relaxation chosen, with the
+    pantograph's contact natural frequency in red. Axes: contact stiffness (or delay) against f_max."""
+    from pantohil.models.stability_map import contact_frequency_hz
+
+    if not rows:
+        return []
+    f = np.unique([r["f_max_hz"] for r in rows])
+    k = np.unique([r["contact_stiffness_N_m"] for r in rows])
+    d = np.unique([r["delay_steps"] for r in rows])
+    index = {(r["delay_steps"], r["f_max_hz"], r["contact_stiffness_N_m"]): r for r in rows}
+    figures = []
+    if len(k) == 1 and len(d) > 1:  # Paper D Fig. 7: delay against f_max at one contact stiffness
+        panels = [("delay", d, lambda fi, xi: index.get((xi, fi, k[0])), f"D{d[0]}-{d[-1]}")]
+    else:
+        panels = [("kc", k, (lambda dd: lambda fi, xi: index.get((dd, fi, xi)))(dd), f"D{dd}") for dd in d]
+    for axis, xs, get, tag in panels:
+        if len(xs) * len(f) < 2:
+            continue
+        rho = np.full((len(f), len(xs)), np.nan)
+        mu = np.full_like(rho, np.nan)
+        for i, fi in enumerate(f):
+            for j, xj in enumerate(xs):
+                r = get(fi, xj)
+                if r is not None:
+                    rho[i, j], mu[i, j] = r["spectral_radius"], r["relaxation"]
+        log_x = axis == "kc" and _is_geometric(xs)
+        xe, ye = _edges(xs, log_x), _edges(f, False)
+        fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
+        stable = np.ma.masked_where(~(rho < 1.0), rho)
+        m0 = axes[0].pcolormesh(xe, ye, stable, cmap="viridis", vmin=np.nanmin(stable) if stable.count() else 0,
+                                vmax=1.0, shading="flat")
+        fig.colorbar(m0, ax=axes[0], label="spectral radius (unstable: blank)")
+        m1 = axes[1].pcolormesh(xe, ye, np.ma.masked_invalid(mu), cmap="magma", shading="flat")
+        fig.colorbar(m1, ax=axes[1], label="relaxation mu_c")
+        for ax in axes:
+            if axis == "kc":
+                kk = np.geomspace(xe[0], xe[-1], 200) if log_x else np.linspace(xe[0], xe[-1], 200)
+                ax.plot(kk, contact_frequency_hz(pantograph, kk), "r-", lw=2, label="contact natural frequency")
+                ax.set_xlabel("contact stiffness k_c [N/m]")
+                if log_x:
+                    ax.set_xscale("log")
+            else:
+                fc = float(contact_frequency_hz(pantograph, k[0]))
+                ax.axhline(fc, color="r", lw=2, label=f"contact natural frequency ({fc:.1f} Hz)")
+                ax.set_xlabel("delay D [steps]")
+            ax.set_ylim(ye[0], ye[-1])
+            ax.legend(loc="upper right", fontsize=8)
+        axes[0].set_ylabel("f_max [Hz]")
+        what = {"step": "step-by-step", "span": "span-by-span"}[update]
+        extra = f"D = {tag[1:]}" if axis == "kc" else f"k_c = {k[0]:.3g} N/m"
+        fig.suptitle(f"{case_name}: {what} updating, {extra} (Paper D Figs. 5-7)")
+        fig.tight_layout()
+        name = f"stability_{update}_{tag}.png"
+        tmp = out / (name + ".part.png")
+        fig.savefig(tmp, dpi=110)
+        plt.close(fig)
+        os.replace(tmp, out / name)
+        figures.append(name)
+    return figures

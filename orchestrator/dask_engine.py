@@ -1,0 +1,70 @@
+"""Independent tasks on Dask (`dask.distributed`): a LocalCluster of worker processes by default, or an
+existing scheduler, so that a sweep or a stability map written for this machine runs on a cluster."""
+from __future__ import annotations
+
+import logging
+import os
+from contextlib import contextmanager
+from typing import Callable, Iterable
+
+from pantohil.models.case import CaseError
+
+CONNECT_TIMEOUT_S = 10
+
+
+@contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None):
+    """A connected Client; `scheduler` is an address such as tcp://127.0.0.1:8786."""
+    from distributed import Client, LocalCluster
+
+    if workers is not None and workers < 1:
+        raise CaseError(f"--workers: must be >= 1 (got {workers})")
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise CaseError(f"--scheduler: cannot reach the Dask scheduler at {scheduler} "
+                            f"within {CONNECT_TIMEOUT_S} s ({type(exc).__name__})") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n = workers or max(1, min(os.cpu_count() or 1, 2))
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.ERROR)
+    client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        cluster.close()
+
+
+def worker_count(client) -> int:
+    return len(client.scheduler_info().get("workers", {}))
+
+
+def run_tasks(client, fn: Callable, items: list, keys: Iterable[str], on_result: Callable, progress: bool = True,
+              desc: str = "tasks") -> None:
+    """Submit fn(item) for every item and call on_result(item, result, error) as each finishes.
+
+    On Ctrl-C the outstanding tasks are cancelled and the interrupt propagates after the results already
+    handed over have been kept by the caller."""
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    futures = client.map(fn, items, key=list(keys), pure=False)
+    item_of = {f.key: item for f, item in zip(futures, items)}
+    try:
+        with tqdm(total=len(futures), desc=desc, disable=not progress, unit="pt") as bar:
+            for fut in as_completed(futures):
+                result, error = None, None
+                try:
+                    result = fut.result()
+                except Exception as exc:  # a failed point is recorded, the others go on
+                    error = f"{type(exc).__name__}: {exc}"
+                on_result(item_of[fut.key], result, error)
+                bar.update(1)
+    finally:
+        client.cancel([f for f in futures if not f.done()])

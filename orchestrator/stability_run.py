@@ -1,0 +1,192 @@
+"""`pantohil stability`: maps of the spectral radius of the virtual HIL iteration over f_max, the contact
+stiffness and the delay, with the best relaxation at every point (Paper D sec. 4, Figs. 5-7).
+
+One Dask task per (f_max, delay) row computes every contact stiffness of the row (the operator is built
+once per row). The delay D is the loop latency, compensated in full (Paper D sec. 3.4); without --delay
+the case's own latency and advance are used (master connections + rig).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from pantohil.models.case import Case, CaseError, load_case
+from pantohil.models.receptance import asm_operator, harmonic_count, reduce_harmonics
+from pantohil.models.stability_map import (best_relaxation, contact_frequency_hz, problem_for,
+                                           with_contact_stiffness)
+
+from .dask_engine import dask_client, run_tasks, worker_count
+from .hil_run import delay_plan
+from .report import write_json_atomic
+
+COLUMNS = ("update", "f_max_hz", "contact_stiffness_N_m", "delay_steps", "relaxation", "spectral_radius")
+
+
+def parse_range(text: str | None, option: str, integer: bool = False) -> np.ndarray | None:
+    """"A:B:N" (N values from A to B), "A:B:N:log" (geometric), "A,B,C" or "A"."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    try:
+        if len(parts) == 1:
+            values = np.array([float(v) for v in text.split(",") if v.strip()])
+        elif len(parts) in (3, 4):
+            a, b, n = float(parts[0]), float(parts[1]), int(parts[2])
+            if n < 1:
+                raise CaseError(f"{option}: empty range {text!r} (N must be >= 1)")
+            if len(parts) == 4 and parts[3] != "log":
+                raise CaseError(f"{option}: expected A:B:N or A:B:N:log (got {text!r})")
+            if len(parts) == 4 and (a <= 0 or b <= 0):
+                raise CaseError(f"{option}: a log range needs positive ends (got {text!r})")
+            values = np.geomspace(a, b, n) if len(parts) == 4 else np.linspace(a, b, n)
+        else:
+            raise ValueError
+    except ValueError:
+        raise CaseError(f"{option}: expected A:B:N, A:B:N:log, A,B,C or A (got {text!r})") from None
+    if len(values) == 0:
+        raise CaseError(f"{option}: empty range {text!r}")
+    if integer:
+        if np.any(values != np.round(values)):
+            raise CaseError(f"{option}: delays are whole steps (got {text!r})")
+        values = np.unique(values.astype(int))
+    return values
+
+
+def _operator(case: Case, f_max: float):
+    """(kernel, None) for the ASM, (None, I_cc) for the PFEM: its operator reduced to f_max's harmonics."""
+    n, dt = case.samples_per_span, case.dt_s
+    nh = harmonic_count(f_max, n, dt)
+    if case.model == "asm":
+        return asm_operator(case.catenary, case.speed_m_s, n, dt, nh).kernel, None
+    from pantohil.builder.operators import case_operators
+    from pantohil.models.operator_file import load_operators
+
+    if nh > case.n_harmonics:
+        raise CaseError(f"--fmax: {f_max:g} Hz needs {nh} harmonics; this PFEM case's operators keep "
+                        f"{case.n_harmonics} (raise hil.max_frequency_hz)")
+    ops = load_operators(case_operators(case, progress=False).path)
+    cc = np.asarray(ops.cc, dtype=float)
+    return None, np.apply_along_axis(reduce_harmonics, 0, cc, nh)  # W~ on the observed index only
+
+
+def stability_row(task: dict) -> list[dict]:
+    """One map row (one f_max and delay, every contact stiffness): runs on a Dask worker."""
+    t0 = time.perf_counter()
+    case = load_case(task["case"], task["overrides"])
+    kernel, I_cc = _operator(case, task["f_max_hz"])
+    rows = []
+    for kc in task["contact_stiffness_N_m"]:
+        pan = with_contact_stiffness(case.pantograph, kc)
+        pb = problem_for(task["update"], pan, case.dt_s, task["latency_steps"], task["delay_steps"], kernel=kernel,
+                         I_cc=I_cc)
+        if task["relaxation"] is None:
+            mu, rho = best_relaxation(pb)
+        else:
+            mu, rho = task["relaxation"], pb.spectral_radius(task["relaxation"])
+        rows.append({"update": task["update"], "f_max_hz": task["f_max_hz"], "contact_stiffness_N_m": float(kc),
+                     "delay_steps": task["delay_steps"], "relaxation": mu, "spectral_radius": rho})
+    rows[-1]["_row_s"] = time.perf_counter() - t0
+    return rows
+
+
+def run_stability(case_path: Path | None, overrides: list[str], out: Path, update: str | None = None,
+                  fmax: str | None = None, kc: str | None = None, delay: str | None = None,
+                  relaxation: float | None = None, scheduler: str | None = None, workers: int | None = None,
+                  progress: bool = True) -> dict:
+    case = load_case(case_path, overrides)
+    update = update or case.hil_update
+    if update not in ("step", "span"):
+        raise CaseError(f"--update: must be step or span (got {update!r})")
+    if relaxation is not None and not 0 < relaxation < 2:
+        raise CaseError(f"--relaxation: must lie in (0, 2) (got {relaxation:g})")
+    f_values = parse_range(fmax, "--fmax")
+    if f_values is None:
+        f_values = np.array([case.values["hil"]["max_frequency_hz"]])
+    k_values = parse_range(kc, "--contact-stiffness")
+    if k_values is None:
+        k_values = np.array([case.pantograph.contact_stiffness_N_m])
+    if np.any(f_values <= 0):
+        raise CaseError(f"--fmax: frequencies must be > 0 Hz (got {fmax})")
+    if np.any(k_values <= 0):
+        raise CaseError(f"--contact-stiffness: must be > 0 N/m (got {kc})")
+    plan = delay_plan(case)
+    d_values = parse_range(delay, "--delay", integer=True)
+    if d_values is None:
+        pairs = [(plan["delay_steps"], plan["loop_latency_steps"] + plan["rig_latency_steps"])]
+    else:
+        if np.any(d_values < 1) or np.any(d_values >= case.samples_per_span):
+            raise CaseError(f"--delay: must lie in 1..{case.samples_per_span - 1} steps (got {delay})")
+        pairs = [(int(d), int(d)) for d in d_values]
+    tasks = [{"case": str(case.source) if case_path is not None else None, "overrides": list(overrides),
+              "update": update, "f_max_hz": float(f), "contact_stiffness_N_m": [float(k) for k in k_values],
+              "delay_steps": d, "latency_steps": lat, "relaxation": relaxation}
+             for d, lat in pairs for f in f_values]
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows: list[dict] = []
+    errors: list[str] = []
+    t0 = time.perf_counter()
+
+    def keep(task, result, error):
+        if error:
+            errors.append(f"f_max {task['f_max_hz']:g} Hz, D {task['delay_steps']}: {error}")
+        else:
+            rows.extend(result)
+
+    with dask_client(scheduler, workers) as client:
+        n_workers = worker_count(client)
+        t_start = time.perf_counter()
+        keys = [f"stability-{os.getpid()}-{i}" for i in range(len(tasks))]
+        run_tasks(client, stability_row, tasks, keys, keep, progress, desc="stability map")
+        t_map = time.perf_counter() - t_start
+    rows.sort(key=lambda r: (r["delay_steps"], r["f_max_hz"], r["contact_stiffness_N_m"]))
+    write_csv(out / "stability.csv", rows)
+    from .report import plot_stability_maps
+
+    figures = plot_stability_maps(out, rows, case.pantograph, update, case.name)
+    rho = np.array([r["spectral_radius"] for r in rows])
+    summary = {
+        "case": case.name, "update": update, "points": len(rows), "tasks": len(tasks), "workers": n_workers,
+        "scheduler": scheduler or "LocalCluster", "failed_rows": errors,
+        "stable_points": int(np.sum(rho < 1)), "min_spectral_radius": float(rho.min()) if len(rho) else None,
+        "contact_frequency_hz_at_case_kc": float(contact_frequency_hz(case.pantograph,
+                                                                      case.pantograph.contact_stiffness_N_m)),
+        "relaxation": "best found" if relaxation is None else relaxation,
+        "timing": {"map_s": t_map, "wall_s": time.perf_counter() - t0,
+                   "per_point_s": t_map / max(len(rows), 1) * max(n_workers, 1)},
+        "figures": figures,
+    }
+    write_json_atomic(out / "summary.json", summary)
+    if errors:
+        raise RuntimeError(f"{len(errors)} map rows failed; first: {errors[0]}")
+    return summary
+
+
+def write_csv(path: Path, rows: list[dict]) -> None:
+    tmp = path.with_suffix(".csv.part")
+    with open(tmp, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(COLUMNS)
+        for r in rows:
+            w.writerow([r["update"], f"{r['f_max_hz']:.6g}", f"{r['contact_stiffness_N_m']:.6g}", r["delay_steps"],
+                        f"{r['relaxation']:.6g}",
+                        f"{r['spectral_radius']:.9g}" if math.isfinite(r["spectral_radius"]) else "inf"])
+    os.replace(tmp, path)
+
+
+def read_csv(path: Path) -> list[dict]:
+    with open(path) as fh:
+        return [{"update": r["update"], "f_max_hz": float(r["f_max_hz"]),
+                 "contact_stiffness_N_m": float(r["contact_stiffness_N_m"]), "delay_steps": int(r["delay_steps"]),
+                 "relaxation": float(r["relaxation"]), "spectral_radius": float(r["spectral_radius"])}
+                for r in csv.DictReader(fh)]
+
+
+def describe(summary: dict) -> str:
+    return json.dumps({k: summary[k] for k in ("points", "stable_points", "min_spectral_radius", "workers")})
