@@ -105,6 +105,15 @@ def _parser() -> argparse.ArgumentParser:
     stab.add_argument("--workers", type=int, help="LocalCluster worker processes (default: 2)")
     stab.add_argument("--quiet", action="store_true", help="no progress bar")
 
+    sweep = sub.add_parser("sweep", help="a grid over case keys as independent runs on Dask (resumable; CSV, "
+                                         "Parquet and plots)")
+    sweep.add_argument("file", type=Path, help="sweep file (TOML), e.g. models/sweeps/speed_200_300.toml")
+    sweep.add_argument("--out", type=Path, required=True, help="sweep folder (a restart into it skips done points)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://10.0.0.1:8786 "
+                                                              "(default: a LocalCluster)")
+    sweep.add_argument("--workers", type=int, help="LocalCluster worker processes (default: 2)")
+    sweep.add_argument("--quiet", action="store_true", help="no progress bar")
+
     example = sub.add_parser("example", help="reproduce a worked example of the thesis")
     example.add_argument("name", choices=["paper-c-appendix"],
                          help="paper-c-appendix: the academic periodic string of Paper C, Appendix A")
@@ -313,6 +322,17 @@ def _cmd_stability(args) -> int:
     return 0
 
 
+def _cmd_sweep(args) -> int:
+    from pantohil.orchestrator.sweep import run_sweep
+
+    s = run_sweep(args.file, args.out, args.scheduler, args.workers, progress=not args.quiet)
+    print(f"{s['name']}: {s['points']} points ({s['skipped_done']} already done, {s['ran']} run): "
+          + ", ".join(f"{k} {v}" for k, v in sorted(s["statuses"].items())) + f"; {s['wall_s']:.1f} s on "
+          f"{s['workers']} workers")
+    print(f"results: {args.out / 'results.csv'} and results.parquet")
+    return 0 if "error" not in s["statuses"] else 1
+
+
 def _cmd_example(args) -> int:
     from pantohil.models.pfem_example import paper_c_appendix
     from pantohil.orchestrator.report import plot_force_history, write_json_atomic
@@ -337,7 +357,8 @@ def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
                "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary, "example": _cmd_example,
-               "fem-sim": _cmd_fem_sim, "compare": _cmd_compare, "stability": _cmd_stability}[args.command]
+               "fem-sim": _cmd_fem_sim, "compare": _cmd_compare, "stability": _cmd_stability,
+               "sweep": _cmd_sweep}[args.command]
     try:
         return handler(args)
     except CaseError as exc:

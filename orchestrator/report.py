@@ -240,3 +240,24 @@ def plot_stability_maps(out: Path, rows: list[dict], pantograph, update: str, ca
         os.replace(tmp, out / name)
         figures.append(name)
     return figures
+
+
+def plot_sweep_std(path: Path, curves: list, x_label: str, y_label: str, title: str) -> None:
+    """One curve per combination of the other grid keys; points that failed or diverged are crossed."""
+    fig, ax = plt.subplots(figsize=(8, 4.8))
+    for label, xs, ys, ok in curves:
+        line, = ax.plot(xs[ok], ys[ok], "o-", ms=4, label=label or None)
+        if np.any(~ok):
+            ax.plot(xs[~ok], np.where(np.isfinite(ys[~ok]), ys[~ok], np.nanmin(ys) if np.any(np.isfinite(ys)) else 0),
+                    "x", color=line.get_color(), ms=8)
+    ax.set_xlabel(x_label)
+    ax.set_ylabel(y_label)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    if any(label for label, *_ in curves):
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    tmp = path.with_suffix(".part.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, path)

@@ -1,0 +1,302 @@
+"""`pantohil sweep`: a grid over case keys run as independent points on Dask, resumable.
+
+A sweep file (TOML) names a case, the keys to sweep and, optionally, keys fixed for every point:
+
+    [sweep]
+    name = "speed_200_300"
+    case = "../cases/asm_250.toml"   # relative to the sweep file; omitted: the built-in case
+    kind = "run"                     # "run": a virtual HIL run per point; "direct": the closed form (Paper A)
+    [set]
+    "hil.relaxation" = 0.1
+    [grid]
+    "run.speed_kmh" = { start = 200.0, stop = 300.0, num = 12 }   # or a list of values
+
+Every combination of the grid values is a point. A point of kind "run" is `pantohil run` in a child
+process of a Dask worker (its own run folder under points/); a point of kind "direct" is the ASM closed
+form, with the extra key `direct.second_pantograph_m` for a trailing pantograph (Paper A Fig. 17). The
+results table (results.csv and results.parquet) is rewritten after every point; a restart with the same
+sweep and folder skips the points already in it.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from pantohil.models.case import SCHEMA, CaseError, load_case
+
+from .dask_engine import dask_client, run_tasks, worker_count
+from .report import write_json_atomic
+
+KINDS = ("run", "direct")
+DIRECT_KEYS = ("direct.second_pantograph_m",)
+STATS = ("status", "converged", "diverged", "spans", "mean_N", "std_N", "std_20hz_N", "max_N", "min_N",
+         "trailing_std_N", "trailing_std_20hz_N", "wall_s", "finished_utc", "message")
+DONE = ("converged", "span_limit", "diverged", "ok")
+
+
+def _fail(path: Path, what: str):
+    raise CaseError(f"sweep file {path}: {what}")
+
+
+def _values(path: Path, key: str, spec) -> list:
+    if isinstance(spec, dict):
+        unknown = set(spec) - {"start", "stop", "num", "log"}
+        if unknown or not {"start", "stop", "num"} <= set(spec):
+            _fail(path, f"grid key {key!r}: a range is {{ start, stop, num [, log] }}")
+        num = spec["num"]
+        if not isinstance(num, int) or num < 1:
+            _fail(path, f"grid key {key!r} has an empty range (num = {num!r})")
+        start, stop = float(spec["start"]), float(spec["stop"])
+        if spec.get("log", False):
+            if start <= 0 or stop <= 0:
+                _fail(path, f"grid key {key!r}: a log range needs positive ends")
+            return [float(v) for v in np.geomspace(start, stop, num)]
+        return [float(v) for v in np.linspace(start, stop, num)]
+    if isinstance(spec, list):
+        if not spec:
+            _fail(path, f"grid key {key!r} has an empty range ([])")
+        return list(spec)
+    return [spec]
+
+
+def _check_key(path: Path, key: str, kind: str, where: str) -> None:
+    if key in DIRECT_KEYS:
+        if kind != "direct":
+            _fail(path, f"{where} key {key!r} needs kind = \"direct\"")
+        return
+    section, _, name = key.partition(".")
+    if section not in SCHEMA or name not in SCHEMA[section]:
+        _fail(path, f"{where} key {key!r} is not a case key (section.key, see models/case.py)")
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(float(v)) if isinstance(v, float) else str(v)
+
+
+def load_sweep(path: Path) -> dict:
+    """Parse and check a sweep file; every point's case is validated before anything runs."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise CaseError(f"sweep file {path} does not exist") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise CaseError(f"sweep file {path} is not valid TOML: {exc}") from None
+    unknown = set(raw) - {"sweep", "set", "grid"}
+    if unknown:
+        _fail(path, f"unknown section [{sorted(unknown)[0]}] (sections: sweep, set, grid)")
+    head = raw.get("sweep", {})
+    bad = set(head) - {"name", "case", "kind", "plot_x", "description"}
+    if bad:
+        _fail(path, f"unknown key sweep.{sorted(bad)[0]}")
+    kind = head.get("kind", "run")
+    if kind not in KINDS:
+        _fail(path, f"sweep.kind must be one of {', '.join(KINDS)} (got {kind!r})")
+    case = (path.parent / head["case"]).resolve() if head.get("case") else None
+    if case is not None and not case.exists():
+        _fail(path, f"sweep.case {head['case']!r}: {case} does not exist")
+    grid = raw.get("grid", {})
+    if not grid:
+        _fail(path, "[grid] names no key to sweep")
+    fixed = raw.get("set", {})
+    for key in grid:
+        _check_key(path, key, kind, "grid")
+    for key in fixed:
+        _check_key(path, key, kind, "set")
+    values = {key: _values(path, key, spec) for key, spec in grid.items()}
+    plot_x = head.get("plot_x", next(iter(grid)))
+    if plot_x not in grid:
+        _fail(path, f"sweep.plot_x {plot_x!r} is not a grid key")
+    points = []
+    for combo in itertools.product(*values.values()):
+        assign = dict(zip(values, combo))
+        overrides = [f"{k}={_toml_value(v)}" for k, v in {**fixed, **assign}.items() if k not in DIRECT_KEYS]
+        extra = {k: v for k, v in {**fixed, **assign}.items() if k in DIRECT_KEYS}
+        try:
+            load_case(case, overrides)
+        except CaseError as exc:
+            _fail(path, f"point {assign}: {exc}")
+        digest = hashlib.sha1(json.dumps([overrides, extra], sort_keys=True).encode()).hexdigest()[:10]
+        points.append({"id": f"p{len(points):03d}-{digest}", "assign": assign, "overrides": overrides, "extra": extra})
+    definition = {"name": head.get("name", path.stem), "kind": kind, "case": str(case) if case else None,
+                  "set": fixed, "grid": values, "plot_x": plot_x}
+    definition["hash"] = hashlib.sha1(json.dumps(definition, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    return {"definition": definition, "points": points}
+
+
+def sweep_point(task: dict) -> dict:
+    """One point, on a Dask worker: a `pantohil run` in a child process, or the closed form."""
+    t0 = time.perf_counter()
+    if task["kind"] == "direct":
+        from .direct import direct_solution
+
+        case = load_case(task["case"], task["overrides"])
+        spacing = task["extra"].get("direct.second_pantograph_m")
+        res = direct_solution(case, spacing)
+        out = {"status": "ok", "converged": True, "diverged": False, "mean_N": res["single"]["mean_N"],
+               "std_N": res["single"]["std_N"], "std_20hz_N": res["single"]["std_20hz_N"], "message": ""}
+        if spacing is not None:
+            two = res["two_pantographs"]
+            out.update(trailing_std_N=two["trailing_std_N"], trailing_std_20hz_N=two["trailing_std_20hz_N"])
+    else:
+        folder = Path(task["folder"])
+        if folder.exists():  # a point interrupted earlier starts afresh
+            shutil.rmtree(folder)
+        cmd = [sys.executable, "-m", "pantohil.orchestrator.cli", "run"]
+        cmd += [task["case"]] if task["case"] else []
+        for o in task["overrides"]:
+            cmd += ["--set", o]
+        cmd += ["--out", str(folder), "--quiet"]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        summary = folder / "summary.json"
+        if proc.returncode not in (0, 1) or not summary.exists():
+            lines = (proc.stderr or proc.stdout).strip().splitlines()
+            raise RuntimeError(lines[-1] if lines else f"pantohil run exited with {proc.returncode}")
+        s = json.loads(summary.read_text())
+        cf = s.get("contact_force", {})
+        out = {"status": s["status"], "converged": s["converged"], "diverged": s["diverged"], "spans": s["spans"],
+               "mean_N": cf.get("mean_N"), "std_N": cf.get("std_N"),
+               "std_20hz_N": cf.get("filtered_20hz", {}).get("std_N"), "max_N": cf.get("max_N"),
+               "min_N": cf.get("min_N"), "message": s["message"]}
+    out["wall_s"] = time.perf_counter() - t0
+    out["finished_utc"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return out
+
+
+def _read_results(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _write_results(out: Path, rows: list[dict], columns: list[str]) -> None:
+    import pandas as pd
+
+    rows = sorted(rows, key=lambda r: r["point"])
+    tmp = out / "results.csv.part"
+    with open(tmp, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=columns, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({c: ("" if r.get(c) is None else r.get(c)) for c in columns})
+    os.replace(tmp, out / "results.csv")
+    frame = pd.read_csv(out / "results.csv")
+    tmp = out / "results.parquet.part"
+    frame.to_parquet(tmp, index=False)
+    os.replace(tmp, out / "results.parquet")
+
+
+def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers: int | None = None,
+              progress: bool = True, log=print) -> dict:
+    sweep = load_sweep(sweep_path)
+    definition, points = sweep["definition"], sweep["points"]
+    out = Path(out)
+    marker = out / "sweep.json"
+    if marker.exists():
+        previous = json.loads(marker.read_text())
+        if previous.get("hash") != definition["hash"]:
+            raise CaseError(f"--out {out}: holds the results of another sweep ({previous.get('name')}); "
+                            "use a new folder")
+    grid_keys = list(definition["grid"])
+    columns = ["point"] + grid_keys + list(STATS)
+    existing = {r["point"]: r for r in _read_results(out / "results.csv")}
+    done = {pid for pid, r in existing.items() if r.get("status") in DONE}
+    todo = [p for p in points if p["id"] not in done]
+    rows = [existing[p["id"]] for p in points if p["id"] in done]
+    with dask_client(scheduler, workers) as client:  # an unreachable scheduler fails before anything is written
+        out.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(marker, definition)
+        n_workers = worker_count(client)
+        log(f"{definition['name']}: {len(points)} points, {len(done)} already done, {len(todo)} to run "
+            f"on {n_workers} workers")
+        tasks = [{"kind": definition["kind"], "case": definition["case"], "overrides": p["overrides"],
+                  "extra": p["extra"], "folder": str((out / "points" / p["id"]).resolve())} for p in todo]
+        by_task = {id(t): p for t, p in zip(tasks, todo)}
+        t0 = time.perf_counter()
+
+        def keep(task, result, error):
+            p = by_task[id(task)]
+            row = {"point": p["id"], **p["assign"]}
+            if error:
+                row.update(status="error", message=error.splitlines()[0][:300],
+                           finished_utc=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+            else:
+                row.update(result)
+            rows.append(row)
+            _write_results(out, rows, columns)
+
+        interrupted = False
+        try:
+            keys = [f"sweep-{definition['hash']}-{p['id']}-{os.getpid()}" for p in todo]
+            run_tasks(client, sweep_point, tasks, keys, keep, progress, desc=definition["name"])
+        except KeyboardInterrupt:
+            interrupted = True
+        wall = time.perf_counter() - t0
+    if rows:
+        _write_results(out, rows, columns)
+    figures = plot_sweep(out, rows, definition) if rows else []
+    statuses = {}
+    for r in rows:
+        statuses[r["status"]] = statuses.get(r["status"], 0) + 1
+    summary = {"name": definition["name"], "kind": definition["kind"], "points": len(points),
+               "skipped_done": len(done), "ran": len(rows) - len(done), "statuses": statuses,
+               "workers": n_workers, "scheduler": scheduler or "LocalCluster", "wall_s": wall,
+               "interrupted": interrupted, "figures": figures}
+    write_json_atomic(out / "summary.json", summary)
+    if interrupted:
+        raise KeyboardInterrupt
+    return summary
+
+
+def plot_sweep(out: Path, rows: list[dict], definition: dict) -> list[str]:
+    """Standard deviation of the contact force against the swept key (Paper B Fig. 12, Paper A Fig. 17)."""
+    from .report import plot_sweep_std
+
+    x = definition["plot_x"]
+    others = [k for k in definition["grid"] if k != x]
+
+    def num(v):
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            return math.nan
+
+    series = {}
+    for r in rows:
+        label = ", ".join(f"{k} = {r.get(k)}" for k in others)
+        series.setdefault(label, []).append(r)
+    curves = []
+    for label, rs in sorted(series.items(), key=lambda kv: [num(kv[1][0].get(k)) for k in others]):
+        rs = sorted(rs, key=lambda r: num(r.get(x)))
+        xs = np.array([num(r.get(x)) for r in rs])
+        ys = np.array([num(r.get("trailing_std_N") if definition["kind"] == "direct" and
+                           "direct.second_pantograph_m" in definition["grid"] else r.get("std_20hz_N"))
+                       for r in rs])
+        ok = np.array([r.get("status") in DONE for r in rs])
+        curves.append((label, xs, ys, ok))
+    trailing = definition["kind"] == "direct" and "direct.second_pantograph_m" in definition["grid"]
+    ylabel = "std of the trailing pantograph's contact force [N]" if trailing else \
+        "std of the contact force, 20 Hz [N]"
+    name = "std_vs_" + x.replace(".", "_") + ".png"
+    plot_sweep_std(out / name, curves, x, ylabel, definition["name"])
+    return [name]
