@@ -125,6 +125,9 @@ SCHEMA = {
         "convergence_tol": (float, 1e-4, _pos, "must be > 0", "rms span-to-span change / std [-]"),
         "force_limit_N": (float, 2000.0, _pos, "must be > 0", "|force| beyond this is divergence [N]"),
         "height_limit_m": (float, 1.0, _pos, "must be > 0", "|height| beyond this is divergence [m]"),
+        "divergence_change": (float, 0.8, _pos, "must be > 0", "median span-to-span change / std beyond which "
+                              "the iteration has diverged (a limit cycle with contact loss) [-]"),
+        "divergence_spans": (int, 10, _pos, "must be > 0", "spans over which that median is taken [-]"),
     },
 }
 

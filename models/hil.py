@@ -109,3 +109,12 @@ class ConvergenceMonitor:
                "max_N": float(np.max(force)), "min_N": float(np.min(force))}
         self.history.append(rec)
         return rec
+
+    def diverging(self, window: int, threshold: float, first_span: int = 0) -> float | None:
+        """Median change over the last `window` spans (from `first_span` on) if it exceeds `threshold`: an
+        unstable iteration whose growth contact loss bounds settles in a limit cycle, not at the force limit."""
+        changes = [h["change"] for h in self.history[first_span:]]
+        if len(changes) < window:
+            return None
+        median = float(np.median(changes[-window:]))
+        return median if median > threshold else None

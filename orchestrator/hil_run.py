@@ -193,6 +193,12 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
             if start >= case.ramp_steps and span >= 2 and rec["change"] <= run["convergence_tol"]:
                 status, message = "converged", f"converged after {span + 1} spans"
                 break
+            median = monitor.diverging(run["divergence_spans"], run["divergence_change"], -(-case.ramp_steps // n) + 1)
+            if median is not None:
+                status, message = "diverged", (f"diverged at span {span}: the span-to-span change stayed at "
+                                               f"{median:.2f} of the std (median of {run['divergence_spans']} spans, "
+                                               f"run.divergence_change {run['divergence_change']:g})")
+                break
     except _Stop as stop:
         status, message = stop.status, str(stop)
         _log_span(recorder, master, topology, (master.k // n) * n, master.k, dt)

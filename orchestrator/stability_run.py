@@ -47,6 +47,8 @@ def parse_range(text: str | None, option: str, integer: bool = False) -> np.ndar
             values = np.geomspace(a, b, n) if len(parts) == 4 else np.linspace(a, b, n)
         else:
             raise ValueError
+    except CaseError:
+        raise
     except ValueError:
         raise CaseError(f"{option}: expected A:B:N, A:B:N:log, A,B,C or A (got {text!r})") from None
     if len(values) == 0:
