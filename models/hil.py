@@ -111,10 +111,12 @@ class ConvergenceMonitor:
         return rec
 
     def diverging(self, window: int, threshold: float, first_span: int = 0) -> float | None:
-        """Median change over the last `window` spans (from `first_span` on) if it exceeds `threshold`: an
-        unstable iteration whose growth contact loss bounds settles in a limit cycle, not at the force limit."""
+        """Median change over the last `window` spans (from `first_span` on) if it exceeds `threshold` and has
+        not fallen since the window before: an unstable iteration whose growth contact loss bounds settles in
+        a limit cycle, not at the force limit, while a stable one's early transient decays."""
         changes = [h["change"] for h in self.history[first_span:]]
-        if len(changes) < window:
+        if len(changes) < 2 * window:
             return None
         median = float(np.median(changes[-window:]))
-        return median if median > threshold else None
+        before = float(np.median(changes[-2 * window:-window]))
+        return median if median > threshold and median >= before else None

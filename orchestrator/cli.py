@@ -325,7 +325,12 @@ def _cmd_stability(args) -> int:
 def _cmd_sweep(args) -> int:
     from pantohil.orchestrator.sweep import run_sweep
 
-    s = run_sweep(args.file, args.out, args.scheduler, args.workers, progress=not args.quiet)
+    try:
+        s = run_sweep(args.file, args.out, args.scheduler, args.workers, progress=not args.quiet)
+    except KeyboardInterrupt:
+        print(f"interrupted: the points done so far are in {args.out / 'results.csv'}; run the same command again "
+              "to run the others", file=sys.stderr)
+        return 130
     print(f"{s['name']}: {s['points']} points ({s['skipped_done']} already done, {s['ran']} run): "
           + ", ".join(f"{k} {v}" for k, v in sorted(s["statuses"].items())) + f"; {s['wall_s']:.1f} s on "
           f"{s['workers']} workers")

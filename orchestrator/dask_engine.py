@@ -9,7 +9,7 @@ from typing import Callable, Iterable
 
 from pantohil.models.case import CaseError
 
-CONNECT_TIMEOUT_S = 10
+CONNECT_TIMEOUT_S = 5
 
 
 @contextmanager
