@@ -21,7 +21,7 @@ from pantohil.models.receptance import asm_operator, harmonic_count, reduce_harm
 from pantohil.models.stability_map import (best_relaxation, contact_frequency_hz, problem_for,
                                            with_contact_stiffness)
 
-from .dask_engine import dask_client, run_tasks, worker_count
+from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
 from .hil_run import delay_plan
 from .report import write_json_atomic
 
@@ -79,6 +79,7 @@ def _operator(case: Case, f_max: float):
 
 def stability_row(task: dict) -> list[dict]:
     """One map row (one f_max and delay, every contact stiffness): runs on a Dask worker."""
+    tune_worker_allocator()
     t0 = time.perf_counter()
     case = load_case(task["case"], task["overrides"])
     kernel, I_cc = _operator(case, task["f_max_hz"])

@@ -37,7 +37,7 @@ import numpy as np
 
 from pantohil.models.case import SCHEMA, CaseError, load_case
 
-from .dask_engine import dask_client, run_tasks, worker_count
+from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
 from .report import write_json_atomic
 
 KINDS = ("run", "direct")
@@ -145,6 +145,7 @@ def load_sweep(path: Path) -> dict:
 
 def sweep_point(task: dict) -> dict:
     """One point, on a Dask worker: a `pantohil run` in a child process, or the closed form."""
+    tune_worker_allocator()
     t0 = time.perf_counter()
     if task["kind"] == "direct":
         from .direct import direct_solution

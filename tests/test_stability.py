@@ -100,3 +100,17 @@ def test_the_best_relaxation_beats_every_grid_value():
     assert 0 < mu < 1
     assert rho <= min(pb.spectral_radius(m) for m in RELAXATION_GRID) + 1e-12
     assert rho == pytest.approx(pb.spectral_radius(mu), rel=1e-9)
+
+
+@pytest.mark.parametrize("kc", [5e4, 1e5, 2e5])
+def test_the_span_map_has_a_barrier_at_the_contact_frequency(kc):
+    """Acceptance 2 (Paper D Fig. 5): span-by-span, whatever the relaxation, stable with f_max below the head's
+    contact natural frequency, unstable just above it."""
+    case = load_case(None, [])
+    pan = with_contact_stiffness(case.pantograph, kc)
+    fc = np.sqrt((pan.stiffnesses_N_m[0] + kc) / pan.masses_kg[0]) / (2 * np.pi)
+    best = {}
+    for factor in (0.85, 1.05):
+        pb = problem_for("span", pan, case.dt_s, 8, 8, kernel=operator(case, factor * fc).kernel)
+        best[factor] = best_relaxation(pb)[1]
+    assert best[0.85] < 1.0 and best[1.05] > 1.15, best
