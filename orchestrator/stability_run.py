@@ -8,7 +8,6 @@ the case's own latency and advance are used (master connections + rig).
 from __future__ import annotations
 
 import csv
-import json
 import math
 import os
 import time
@@ -189,7 +188,3 @@ def read_csv(path: Path) -> list[dict]:
                  "contact_stiffness_N_m": float(r["contact_stiffness_N_m"]), "delay_steps": int(r["delay_steps"]),
                  "relaxation": float(r["relaxation"]), "spectral_radius": float(r["spectral_radius"])}
                 for r in csv.DictReader(fh)]
-
-
-def describe(summary: dict) -> str:
-    return json.dumps({k: summary[k] for k in ("points", "stable_points", "min_spectral_radius", "workers")})
