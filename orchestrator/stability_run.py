@@ -72,8 +72,8 @@ def _operator(case: Case, f_max: float):
         raise CaseError(f"--fmax: {f_max:g} Hz needs {nh} harmonics; this PFEM case's operators keep "
                         f"{case.n_harmonics} (raise hil.max_frequency_hz)")
     ops = load_operators(case_operators(case, progress=False).path)
-    cc = np.asarray(ops.cc, dtype=float)
-    return None, np.apply_along_axis(reduce_harmonics, 0, cc, nh)  # W~ on the observed index only
+    I_cc = np.asarray(ops.cc, dtype=float).T  # ops.cc[m] is column m: the heights per unit force at sample m
+    return None, np.apply_along_axis(reduce_harmonics, 0, I_cc, nh)  # W~ on the observed index only
 
 
 def stability_row(task: dict) -> list[dict]:

@@ -189,6 +189,19 @@ def test_pfem_benchmark_matches_its_reference_results(pfem_runs):
     assert s["contact_force"]["filtered_20hz"]["std_N"] == pytest.approx(ref["linear"]["std_N"], rel=0.01)
 
 
+def test_the_stability_map_predicts_the_linear_pfem_run(pfem_runs, tmp_path):
+    """Issue 7 with a PFEM operator (not circulant: the dense span map): the linear run's rate per span."""
+    out = tmp_path / "map"
+    proc = pantohil("stability", str(CASES / "pfem_benchmark_250.toml"), "--set", "pfem.droppers=false",
+                    "--fmax", "20", "--relaxation", "0.1", "--workers", "1", "--out", str(out), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    rho = float(open(out / "stability.csv").read().splitlines()[1].split(",")[-1])
+    s, _ = load_run(pfem_runs["linear"])
+    change = [h["change"] for h in s["convergence"]]
+    rate = (change[-1] / change[-11]) ** (1 / 10)
+    assert rho < 0.95 and rate == pytest.approx(rho, rel=0.05)
+
+
 def test_slackening_changes_the_force_where_droppers_slacken(pfem_runs):
     s_nl, span_nl = load_run(pfem_runs["nonlinear"])
     s_l, span_l = load_run(pfem_runs["linear"])
