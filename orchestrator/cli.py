@@ -314,8 +314,15 @@ def _cmd_compare(args) -> int:
 def _cmd_stability(args) -> int:
     from pantohil.orchestrator.stability_run import run_stability
 
-    s = run_stability(args.case, args.overrides, args.out, args.update, args.fmax, args.contact_stiffness, args.delay,
-                      args.relaxation, args.scheduler, args.workers, progress=not args.quiet)
+    try:
+        s = run_stability(args.case, args.overrides, args.out, args.update, args.fmax, args.contact_stiffness,
+                          args.delay, args.relaxation, args.scheduler, args.workers, progress=not args.quiet)
+    except KeyboardInterrupt:
+        print("interrupted: no map written", file=sys.stderr)
+        return 130
+    except RuntimeError as exc:  # rows that failed on a worker: the others are in stability.csv
+        print(f"pantohil: error: {exc}", file=sys.stderr)
+        return 1
     print(f"{s['points']} points ({s['update']}), {s['stable_points']} stable, lowest spectral radius "
           f"{s['min_spectral_radius']:.4f}; {s['timing']['map_s']:.1f} s on {s['workers']} workers")
     print(f"written to {args.out}")
