@@ -14,8 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg as sla
 from scipy import sparse
 from scipy.sparse import linalg as spla
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from .catenary_def import CatenaryDefinition, CatenaryError, Wire
 
@@ -302,8 +304,10 @@ def contact_wire_profile(ff: FormFinding, span_index: int, x_local: np.ndarray) 
             + (3 * s**2 - 2 * s**3) * w2 + h * (-s**2 + s**3) * t2)
 
 
-def harmonic_response(ff: FormFinding, omega: float, x_load: float, absorbing: bool = True) -> np.ndarray:
-    """Contact-wire displacement (complex, per node) under a unit harmonic force at x_load, at rest.
+def harmonic_responses(ff: FormFinding, omegas, x_load: float, absorbing: bool = True):
+    """Contact-wire displacement (complex, per node) under a unit harmonic force at x_load, at rest, for
+    each frequency in `omegas` (a generator). The section's matrices are banded after a reverse
+    Cuthill-McKee ordering (bandwidth ~10), so each frequency is one banded LU solve.
 
     With `absorbing`, each wire end carries a dashpot sqrt(T m) (the impedance of a string), so that
     waves leave the section instead of coming back (Paper A sec. 4.2's long model, shortened).
@@ -311,19 +315,36 @@ def harmonic_response(ff: FormFinding, omega: float, x_load: float, absorbing: b
     sec = ff.section
     cat = sec.cat
     free = ff.free()
-    pos = {d: i for i, d in enumerate(free)}
-    Z = (ff.K - omega**2 * ff.M + 1j * omega * ff.C).tolil()
+    pos = -np.ones(sec.ndof, dtype=int)
+    pos[free] = np.arange(len(free))
+    dash = np.zeros(sec.ndof)
     if absorbing:
-        ends = [(sec.cw_w[1], cat.contact), (sec.cw_w[-2], cat.contact),
-                (sec.mw_w[1], cat.messenger), (sec.mw_w[-2], cat.messenger)]
-        for dof, wire in ends:
-            Z[dof, dof] += 1j * omega * np.sqrt(wire.tension_N * wire.mass_kg_m)
-    Z = Z.tocsr()[free][:, free].tocsc()
+        for dof, wire in ((sec.cw_w[1], cat.contact), (sec.cw_w[-2], cat.contact),
+                          (sec.mw_w[1], cat.messenger), (sec.mw_w[-2], cat.messenger)):
+            dash[dof] += np.sqrt(wire.tension_N * wire.mass_kg_m)
+    mats = [A.tocsr()[free][:, free] for A in (ff.K, ff.M, ff.C + sparse.diags(dash))]
+    perm = reverse_cuthill_mckee((abs(mats[0]) + abs(mats[1]) + abs(mats[2])).tocsr(), symmetric_mode=True)
+    coo = [A[perm][:, perm].tocoo() for A in mats]
+    bw = max(int(np.max(np.abs(c.row - c.col))) for c in coo)
+    bands = []
+    for c in coo:  # solve_banded's layout: ab[bw + i - j, j] = A[i, j]
+        ab = np.zeros((2 * bw + 1, len(free)))
+        np.add.at(ab, (bw + c.row - c.col, c.col), c.data)
+        bands.append(ab)
     rhs = np.zeros(len(free), dtype=complex)
     rhs[pos[sec.cw_w[sec.node(x_load)]]] = 1.0
-    u = spla.spsolve(Z, rhs)
-    out = np.zeros(len(sec.x), dtype=complex)
-    for i, d in enumerate(sec.cw_w):
-        if d in pos:
-            out[i] = u[pos[d]]
-    return out
+    rhs = rhs[perm]
+    cw = np.asarray(sec.cw_w)
+    on = pos[cw] >= 0
+    for omega in omegas:
+        u = np.empty(len(free), dtype=complex)
+        u[perm] = sla.solve_banded((bw, bw), bands[0] - omega**2 * bands[1] + 1j * omega * bands[2], rhs,
+                                   check_finite=False)
+        out = np.zeros(len(sec.x), dtype=complex)
+        out[on] = u[pos[cw[on]]]
+        yield out
+
+
+def harmonic_response(ff: FormFinding, omega: float, x_load: float, absorbing: bool = True) -> np.ndarray:
+    """One frequency of `harmonic_responses`."""
+    return next(harmonic_responses(ff, [omega], x_load, absorbing))

@@ -88,18 +88,23 @@ def test_paper_a_vertical_stiffness(paper_a):
 
 
 def test_paper_a_asm_fit(paper_a):
-    # Paper A Table 1: mu = 1.4735 kg/m over 10-40 Hz; the three bands 1.4652 / 1.4790 / 1.4735
+    """Paper A Table 1: mu = 1.4652 / 1.4790 / 1.4735 kg/m over 5-20 / 10-20 / 10-40 Hz. Issue acceptance:
+    the 10-40 Hz value within 15 % and the three within 2 % of each other (measured: 1.4749 / 1.4808 /
+    1.4653, 1.06 % apart, each within 0.7 % of the printed value)."""
     fits = {tuple(f["band_hz"]): f["density_kg_m"] for f in paper_a.fits}
     assert fits[(10.0, 40.0)] == pytest.approx(1.4735, rel=0.15)
     values = list(fits.values())
-    # measured here: 3.1 % apart (the issue asks for 2 %; see the closing note): assert the measured level
-    assert (max(values) - min(values)) / np.mean(values) < 0.04
-    # the fitted string reproduces the propagating FE wavelengths
+    assert (max(values) - min(values)) / min(values) <= 0.02
+    for band, printed in (((5.0, 20.0), 1.4652), ((10.0, 20.0), 1.4790), ((10.0, 40.0), 1.4735)):
+        assert fits[band] == pytest.approx(printed, rel=0.015)
+    # the fitted string reproduces the propagating FE wavelengths from 10 to 40 Hz: 1.8 % RMS; up to 6 % at
+    # the edges of the periodic structure's stop bands (Bragg dispersion the string cannot have)
     p = AsmParameters(paper_a.contact_tension_N, fits[(10.0, 40.0)], paper_a.support_stiffness_N_m2,
                       paper_a.alpha_1_s, paper_a.beta_s)
-    for f, lam, ok in zip(paper_a.wave_frequencies_hz, paper_a.wavelengths_m, paper_a.propagating):
-        if ok and f >= 10:
-            assert lam == pytest.approx(wavelength_at_rest(p, 2 * np.pi * f), rel=0.05)
+    dev = np.array([lam / wavelength_at_rest(p, 2 * np.pi * f) - 1
+                    for f, lam, ok in zip(paper_a.wave_frequencies_hz, paper_a.wavelengths_m, paper_a.propagating)
+                    if ok and f >= 10])
+    assert len(dev) > 100 and np.sqrt(np.mean(dev**2)) < 0.025 and np.max(np.abs(dev)) < 0.07
 
 
 def test_catenary_command_writes_its_folder(tmp_path):
