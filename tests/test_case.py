@@ -1,4 +1,4 @@
-"""Case files: defaults, overrides and one-line errors naming the key (issue 2 acceptance 5)."""
+"""Case files: defaults, overrides and one-line errors naming the key."""
 import pytest
 
 from pantohil.models.case import CaseError, load_case

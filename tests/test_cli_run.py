@@ -1,4 +1,4 @@
-"""`pantohil run` end to end: three FMUs stepped by the fmpy master (issue 2 acceptance 1, 2, 5)."""
+"""`pantohil run` end to end: three FMUs stepped by the fmpy master."""
 import json
 
 import numpy as np
@@ -17,7 +17,7 @@ def test_default_case_converges_to_the_closed_form(default_run):
     assert summary["converged"] and not summary["diverged"]
     assert summary["samples_per_span"] == 936 and summary["dt_s"] == pytest.approx(1e-3)
     assert summary["hil"]["delay_steps"] == summary["hil"]["loop_latency_steps"] + summary["hil"]["rig_latency_steps"]
-    # acceptance 1: dynamic part within 0.5 % (rms) of the closed form's standard deviation
+    # the dynamic part within 0.5 % (rms) of the closed form's standard deviation
     assert summary["reference"]["rms_error_rel_std"] <= 5e-3
     assert summary["contact_force"]["mean_N"] == pytest.approx(summary["pantograph"]["uplift_force_N"], rel=1e-3)
     assert span.shape == (936, 4)
@@ -52,7 +52,7 @@ def test_span_by_span_at_10_hz(tmp_path):
 
 
 def test_rig_delay_compensated_equals_no_delay_and_uncompensated_differs(default_run, tmp_path):
-    # acceptance 2: the default case has a 4-step rig delay, compensated
+    # the default case has a 4-step rig delay, compensated
     with_delay, f_delay = load_run(default_run)
     no_delay_dir = tmp_path / "nodelay"
     assert pantohil("run", "--out", str(no_delay_dir), "--quiet", "--set", "rig.delay_steps=0").returncode == 0

@@ -1,4 +1,4 @@
-"""Model exchange (issue 8): the same run under libcosim, from an SSP file, from the OSP system
+"""Model exchange: the same run under libcosim, from an SSP file, from the OSP system
 structure, and from a partner package in a fresh virtual environment with no repository on the path."""
 import json
 import os
@@ -103,7 +103,7 @@ def test_partner_package_runs_by_its_own_readme_in_a_fresh_venv(tmp_path):
         alone.mkdir()
         (alone / fmu.name).write_bytes(fmu.read_bytes())
         # os._exit after the result: tearing down a library that embeds Python objects at interpreter exit is
-        # the unsafe part the README warns hosts about (seen once in CI: a heap abort after the output)
+        # the unsafe part the README warns hosts about (a heap abort after the output)
         code = ("from fmpy import simulate_fmu; import numpy as np; import os, sys; "
                 f"r = simulate_fmu('{fmu.name}', stop_time=0.05, step_size=0.001, output_interval=0.001); "
                 "print(len(r), all(np.isfinite(r[n]).all() for n in r.dtype.names)); sys.stdout.flush(); os._exit(0)")

@@ -80,7 +80,7 @@ def test_compare_overlays_two_runs(short_run, tmp_path):
 
 
 def test_a_long_fe_string_reproduces_the_asm_closed_form():
-    """Issue 5 acceptance 2: ASM2 (the default case's string) as a long finite FE model (0.05 m elements:
+    """ASM2 (the default case's string) as a long finite FE model (0.05 m elements:
     the mesh must resolve the moving load's local deflection, a 0.25 m mesh lags by about 0.5 ms and
     leaves 4.7 %), the pantograph running over it; its central spans against the closed form of Paper A
     eqs. 38-41 (harmonics up to 100 Hz), both low-passed at 20 Hz: RMS within 2 % of the std. 30 spans

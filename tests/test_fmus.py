@@ -1,5 +1,5 @@
-"""The four FMUs: clean fmpy validation, units and descriptions on every variable (issue 2
-acceptance 3, issue 8 acceptance 3); the libcosim run is in test_exchange.py."""
+"""The four FMUs: clean fmpy validation, units and descriptions on every variable;
+the libcosim run is in test_exchange.py."""
 import zipfile
 import xml.etree.ElementTree as ET
 

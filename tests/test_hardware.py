@@ -1,4 +1,4 @@
-"""The hardware path (issue 6): adapter FMU <-UDP-> rig emulator on loopback, real time, faults,
+"""The hardware path: adapter FMU <-UDP-> rig emulator on loopback, real time, faults,
 fuzzing, link loss and actuator limits."""
 import json
 import random
@@ -53,7 +53,7 @@ def rel_rms(a, b):
 
 
 def test_realtime_run_through_the_emulator_matches_the_virtual_hil(default_run, tmp_path):
-    # acceptance 1: real time at dt = 1 ms on loopback; the deadline figure is reported, not asserted
+    # real time at dt = 1 ms on loopback; the deadline figure is reported, not asserted
     # (shared machines are noisy); convergence, accuracy and the link are asserted
     emu = Emulator(tmp_path)
     out = tmp_path / "rt"
@@ -73,7 +73,7 @@ def test_realtime_run_through_the_emulator_matches_the_virtual_hil(default_run, 
 
 
 def test_loss_and_reordering_still_converge_and_the_counters_match(default_run, tmp_path):
-    # acceptance 2: 2 % loss and 2 % reordering injected by the emulator (as fast as possible; a
+    # 2 % loss and 2 % reordering injected by the emulator (as fast as possible; a
     # generous receive timeout so that only injected faults make answers late)
     emu = Emulator(tmp_path, "--loss", "0.02", "--reorder", "0.02", "--seed", "11")
     out = tmp_path / "faults"
@@ -111,7 +111,7 @@ def _junk(rng: random.Random, valid: bytes) -> bytes:
 
 
 def test_fuzzing_the_emulator(tmp_path):
-    # acceptance 3 (emulator side): 10,000 random and truncated datagrams, each counted as malformed,
+    # emulator side: 10,000 random and truncated datagrams, each counted as malformed,
     # while a valid session goes on
     emu = Emulator(tmp_path)
     rng = random.Random(5)
@@ -136,7 +136,7 @@ def test_fuzzing_the_emulator(tmp_path):
 
 
 def test_fuzzing_the_adapter(tmp_path):
-    # acceptance 3 (adapter side): the adapter FMU in this process, stepping against the emulator
+    # adapter side: the adapter FMU in this process, stepping against the emulator
     # while 10,000 junk datagrams reach its port
     from pantohil.builder.build_fmus import build_case_fmus
     from pantohil.models.case import load_case
@@ -169,7 +169,7 @@ def test_fuzzing_the_adapter(tmp_path):
 
 
 def test_link_loss_ends_the_run_with_exit_3_and_a_readable_log(tmp_path):
-    # acceptance 4: the emulator is killed mid-run
+    # the emulator is killed mid-run
     emu = Emulator(tmp_path)
     out = tmp_path / "lost"
     run = subprocess.Popen([sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--hardware", emu.address,
@@ -192,7 +192,7 @@ def test_link_loss_ends_the_run_with_exit_3_and_a_readable_log(tmp_path):
 
 
 def test_commands_never_exceed_the_actuator_limits(tmp_path):
-    # acceptance 5: a case whose heights need more stroke, velocity and acceleration than allowed
+    # a case whose heights need more stroke, velocity and acceleration than allowed
     emu = Emulator(tmp_path)
     out = tmp_path / "limits"
     limits = {"actuator.stroke_min_m": -0.01, "actuator.stroke_max_m": 0.03,

@@ -88,7 +88,7 @@ def test_fixed_interface_path_equals_the_direct_frf_on_a_catenary_span():
 
 
 def test_pfem_of_the_asm_string_reproduces_the_asm_operator():
-    """Acceptance 2 of the PFEM issue: a 0.1 m mesh of ASM2 (Paper B Table 1), 250 km/h, 25 Hz: the two
+    """A 0.1 m mesh of ASM2 (Paper B Table 1), 250 km/h, 25 Hz: the two
     periodic models agree within 2 % (relative Frobenius norm after the same reduction; measured 0.97 %)."""
     cat = AsmParameters(31500.0, 1.4735, 51.15, 0.0125, 1e-4)
     L, V, n = 65.0, 250 / 3.6, 936
@@ -192,7 +192,7 @@ def test_pfem_benchmark_matches_its_reference_results(pfem_runs):
 
 
 def test_the_stability_map_predicts_the_linear_pfem_run(pfem_runs, tmp_path):
-    """Issue 7 with a PFEM operator (not circulant: the dense span map): the linear run's rate per span."""
+    """The stability map with a PFEM operator (not circulant: the dense span map): the linear run's rate per span."""
     out = tmp_path / "map"
     proc = pantohil("stability", str(CASES / "pfem_benchmark_250.toml"), "--set", "pfem.droppers=false",
                     "--fmax", "40", "--relaxation", "0.1", "--workers", "1", "--out", str(out), "--quiet")
@@ -244,10 +244,10 @@ def test_libcosim_runs_the_pfem_case_like_fmpy(pfem_runs, tmp_path):
 
 
 def test_pfem_agrees_with_conventional_sections_of_15_and_30_spans(pfem_runs, tmp_path):
-    """Issue 5 acceptance 1 (Paper C Figs. 9-10): the converged PFEM span against the mean of the central
+    """Paper C Figs. 9-10: the converged PFEM span against the mean of the central
     spans of finite sections, both at 20 Hz. The std holds to the issue's 3 %. The RMS difference is 6.7 %
     against 30 spans (measured; the issue asks 5 %, met against 60 spans, 3.5 %, too slow for CI): the
-    30-span model's central spans are themselves 4.7 % RMS from a 60-span model's (README), so 8 % here.
+    30-span model's central spans are themselves 4.7 % RMS from a 60-span model's (docs/method.md), so 8 % here.
     The longer section is the closer (Fig. 9). Droppers: the same slack intervals within 15 steps (measured
     <= 10 of 31-77) and the same largest correction within 10 % (measured <= 5.3 %) (Fig. 10)."""
     rms, std = {}, {}

@@ -28,7 +28,7 @@ def radius(overrides, latency):
 
 
 def test_step_by_step_prediction_meets_simulation():
-    # default case (25 Hz): stable with a loop latency of 8 steps, unstable with 12 (see the README)
+    # default case (25 Hz): stable with a loop latency of 8 steps, unstable with 12 (docs/method.md)
     rho8, case = radius([], 8)
     rho12, _ = radius([], 12)
     assert rho8 < 0.95 and rho12 > 1.05
@@ -104,7 +104,7 @@ def test_the_best_relaxation_beats_every_grid_value():
 
 @pytest.mark.parametrize("kc", [5e4, 1e5, 2e5])
 def test_the_span_map_has_a_barrier_at_the_contact_frequency(kc):
-    """Acceptance 2 (Paper D Fig. 5): span-by-span, whatever the relaxation, stable with f_max below the head's
+    """Paper D Fig. 5: span-by-span, whatever the relaxation, stable with f_max below the head's
     contact natural frequency, unstable just above it."""
     case = load_case(None, [])
     pan = with_contact_stiffness(case.pantograph, kc)

@@ -1,4 +1,4 @@
-"""`pantohil stability` (issue 7): maps on Dask, and its predictions against virtual HIL runs of the FMUs."""
+"""`pantohil stability`: maps on Dask, and its predictions against virtual HIL runs of the FMUs."""
 import csv
 import json
 from concurrent.futures import ThreadPoolExecutor
@@ -11,7 +11,7 @@ from pantohil.models.case import load_case
 from pantohil.models.receptance import asm_operator, harmonic_count
 from pantohil.models.stability_map import problem_for, with_contact_stiffness
 
-MASTER_LATENCY = 4  # one step per connection of the virtual loop (README: delays)
+MASTER_LATENCY = 4  # one step per connection of the virtual loop (docs/user-guide.md: the system)
 
 # (update, f_max [Hz], k_c [N/m], loop latency [steps], mu_c): both strategies, several delays
 POINTS = [("step", 25, 5e4, 8, 0.1), ("step", 25, 5e4, 12, 0.1), ("step", 25, 5e4, 4, 0.3),
@@ -40,7 +40,7 @@ def _simulate(tmp_path, i, update, fmax, kc, latency, mu):
 
 
 def test_predictions_meet_the_virtual_hil_runs(tmp_path):
-    """Acceptance 1: predicted stable (rho < 0.95) converge, predicted unstable (rho > 1.05) diverge and stop
+    """Predicted stable (rho < 0.95) converge, predicted unstable (rho > 1.05) diverge and stop
     early; the measured rate per span equals rho; more spans where rho is larger."""
     with ThreadPoolExecutor(2) as pool:
         rho = list(pool.map(lambda a: _predict(tmp_path, a[0], *a[1]), enumerate(POINTS)))

@@ -1,4 +1,4 @@
-"""`pantohil sweep` (issue 7): a 12-point speed sweep on Dask, on a LocalCluster and on a separately started
+"""`pantohil sweep`: a 12-point speed sweep on Dask, on a LocalCluster and on a separately started
 scheduler and worker, interrupted and resumed; bad sweep input."""
 import csv
 import json

@@ -1,4 +1,4 @@
-"""Wall time of `pantohil catenary FILE --out DIR` for the shipped catenary files (issue 3 acceptance 6:
+"""Wall time of `pantohil catenary FILE --out DIR` for the shipped catenary files (budget:
 at most 10 s each). Prints medians over repeats of the whole command (process start included)."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""fem-sim budget (issue 5 acceptance 3): a 30-span run of pfem_benchmark_250 in at most 60 s, memory
+"""fem-sim budget: a 30-span run of pfem_benchmark_250 in at most 60 s, memory
 reported. Prints medians over repeats; not a timed test.
 
     python tests/benchmarks/bench_fem_sim.py [--repeats 3] [--spans 30]

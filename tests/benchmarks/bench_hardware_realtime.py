@@ -1,5 +1,5 @@
-"""Real-time runs of the default case through the adapter FMU and the rig emulator on loopback
-(issue 6 acceptance 1). Prints, per run and as medians: deadline misses, lateness percentiles, link
+"""Real-time runs of the default case through the adapter FMU and the rig emulator on loopback.
+Prints, per run and as medians: deadline misses, lateness percentiles, link
 counters and the difference from the in-process virtual HIL. Not a timed test.
 
     python tests/benchmarks/bench_hardware_realtime.py [--repeats 3] [--spans N]

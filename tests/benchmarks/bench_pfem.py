@@ -1,4 +1,4 @@
-"""PFEM budgets (issue 4 acceptance 4): operator build time of the benchmark-like case (limit 180 s on this
+"""PFEM budgets: operator build time of the benchmark-like case (limit 180 s on this
 2-core machine; the thesis reports about 30 min), load from the cache (limit 2 s), and the catenary FMU's
 do_step with droppers (limit 50 us median; the thesis reports 0.15 ms). Also writes the contact force of
 the nonlinear (dropper slackening) and linear runs overlaid. Prints medians; not a timed test.

@@ -1,5 +1,5 @@
 """Real-time factor of the default case through fmpy with the three FMUs and MCAP logging
-(issue 2 acceptance 4: at least 10x real time). Prints medians over repeats; not a timed test.
+(budget: at least 10x real time). Prints medians over repeats; not a timed test.
 
     python tests/benchmarks/bench_realtime.py [--repeats 5] [--spans 30]
 """

@@ -1,4 +1,4 @@
-"""Stability map budget (issue 7 acceptance 3): a 20 x 20 map (f_max x contact stiffness, best relaxation at
+"""Stability map budget: a 20 x 20 map (f_max x contact stiffness, best relaxation at
 every point) of the default case within 5 minutes; how it scales from 1 to 2 Dask workers; and the cost of
 one spectral radius by each construction. Prints medians; not a timed test.
 
