@@ -43,6 +43,11 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--realtime", action="store_true", help="pace the master against the wall clock at dt")
     run.add_argument("--rt-priority", type=int, default=50, metavar="P",
                      help="with --realtime: SCHED_FIFO priority if permitted (0: normal scheduling; default 50)")
+    run.add_argument("--live", nargs="?", const="", metavar="HOST:PORT",
+                     help="serve the run's channels to Foxglove over WebSocket while it runs (default "
+                          "127.0.0.1:8765; port 0 picks a free one); open docs/foxglove/pantohil-layout.json")
+    run.add_argument("--live-wait", action="store_true",
+                     help="with --live: start stepping once a viewer has subscribed to a channel")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     emu = sub.add_parser("rig-emulator", help="play a rig controller over UDP for a case (lockstep, fault injection)")
@@ -159,9 +164,13 @@ def _cmd_run(args) -> int:
             raise CaseError(f"--hardware: {exc}") from None
         except OSError as exc:
             raise CaseError(f"--hardware: cannot resolve {hardware[0]!r} ({exc.strerror})") from None
+    if args.live_wait and args.live is None:
+        raise CaseError("--live-wait: needs --live")
+    live = _live_endpoint(args.live) if args.live is not None else None
     out = args.out or Path("runs") / f"{case.name}-{datetime.now():%Y%m%d-%H%M%S}"
     result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system,
-                      hardware=hardware, realtime=args.realtime, rt_priority=args.rt_priority)
+                      hardware=hardware, realtime=args.realtime, rt_priority=args.rt_priority, live=live,
+                      live_wait=args.live_wait)
     cf = result.get("contact_force", {})
     print(f"{result['status']}: {result['message']}")
     if cf:
@@ -179,6 +188,25 @@ def _cmd_run(args) -> int:
     if result["status"] == "link_lost":
         print(f"pantohil: error: {result['message']}", file=sys.stderr)
     return result.exit_code
+
+
+def _live_endpoint(value: str) -> tuple[str, int]:
+    """--live HOST:PORT, checked before anything is written: the host resolves and the port is free."""
+    import socket
+
+    from pantohil.orchestrator.live import parse_live
+
+    try:
+        host, port = parse_live(value)
+    except ValueError as exc:
+        raise CaseError(str(exc)) from None
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            probe.bind((host, port))
+    except OSError as exc:
+        raise CaseError(f"--live: cannot listen on {host}:{port} ({exc.strerror})") from None
+    return host, port
 
 
 def _cmd_emulator(args) -> int:

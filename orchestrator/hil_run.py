@@ -25,6 +25,7 @@ from pantohil.models.hil import ConvergenceMonitor
 from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
 
 from . import report
+from .channels import span_force_record
 from .master import JacobiMaster
 from .pacing import Pacer, set_realtime_priority
 from .recorder import McapRecorder
@@ -102,9 +103,11 @@ def closed_form_reference(case: Case) -> np.ndarray:
 
 def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str = "fmpy",
              system: dict | None = None, hardware: tuple[str, int] | None = None,
-             realtime: bool = False, rt_priority: int | None = 50) -> RunResult:
+             realtime: bool = False, rt_priority: int | None = 50, live: tuple[str, int] | None = None,
+             live_wait: bool = False) -> RunResult:
     """Run a case. `system` (fmus, connections, parameters), e.g. from an SSP file, replaces the build;
-    `hardware` (host, port) runs against a rig controller through the adapter FMU."""
+    `hardware` (host, port) runs against a rig controller through the adapter FMU; `live` (host, port)
+    serves the run's channels to Foxglove while it runs (`live_wait`: from a viewer's first subscription on)."""
     if master_kind not in MASTERS:
         raise CaseError(f"--master: must be one of {', '.join(MASTERS)} (got {master_kind!r})")
     if hardware is not None and (system is not None or master_kind != "fmpy"):
@@ -138,7 +141,8 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     capacity = run["max_spans"] * n
     pacing_group = {"/master": {"lateness_us": "start of the step after its slot start [us]",
                                 "duration_us": "wall time of the step [us]"}} if realtime else {}
-    recorder = McapRecorder(out_dir / "run.mcap", topology.groups | pacing_group | {"/convergence": {}},
+    groups = topology.groups | pacing_group
+    recorder = McapRecorder(out_dir / "run.mcap", groups,
                             {"case": case.name, "dt_s": dt, "samples_per_span": n, "master": master_kind,
                              "topology": topology.name, "realtime": realtime})
     try:
@@ -149,6 +153,11 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
         else:
             master = JacobiMaster(fmus, connections, parameters, dt, capacity)
     except Exception:
+        recorder.close()
+        raise
+    try:
+        publisher = _start_live(live, master, groups, topology, dt, case.name) if live is not None else None
+    except CaseError:
         recorder.close()
         raise
     monitor = ConvergenceMonitor(n)
@@ -163,6 +172,10 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     bar = tqdm(total=run["max_spans"], unit="span", disable=None if progress else True, leave=False, desc=case.name)
     t_start = time.perf_counter()
     try:
+        if publisher is not None and live_wait:
+            print("live: waiting for a viewer to subscribe (Ctrl-C to stop)", flush=True)
+            publisher.wait_for_viewer()
+            t_start = time.perf_counter()
         if hardware is not None and _link_state_now(master) == LINK_FAULT:
             raise _Stop("link_lost", f"the rig at {hardware[0]}:{hardware[1]} did not answer the session start")
         if pacer is not None:
@@ -186,8 +199,13 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
                                              f"last position held")
             start = span * n
             _log_span(recorder, master, topology, start, start + n, dt)
-            rec = monitor.close_span(span, master.column("catenary", "force_at_sample", start, start + n))
+            force = master.column("catenary", "force_at_sample", start, start + n)
+            previous = master.column("catenary", "force_at_sample", start - n, start) if span else None
+            rec = monitor.close_span(span, force)
             recorder.write_event("/convergence", (start + n) * dt, rec)
+            recorder.write_event("/span_force", (start + n) * dt, span_force_record(span, dt, force, previous))
+            if publisher is not None:
+                publisher.span_closed((start + n) * dt, rec, force, previous)
             bar.update(1)
             bar.set_postfix(change=f"{rec['change']:.2e}", mean=f"{rec['mean_N']:.1f}", std=f"{rec['std_N']:.2f}")
             if start >= case.ramp_steps and span >= 2 and rec["change"] <= run["convergence_tol"]:
@@ -211,6 +229,8 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
             pacer.stop()
         bar.close()
         recorder.close()
+        if publisher is not None:
+            publisher.close()
         per_step = master.per_step_us()
         master.close()
     extra = {"topology": topology.name}
@@ -242,23 +262,46 @@ def _link_state_now(master) -> int:
     return int(master.instances["adapter"].get_values(["link_state"])["link_state"])
 
 
+def _group_block(master, groups: dict, topic: str, start: int, stop: int) -> np.ndarray:
+    """Columns of a logged group for steps start..stop-1: an FMU's outputs and inputs, or the pacer's."""
+    if topic == "/master":
+        pacer = master.pacer
+        return np.column_stack([pacer.lateness_ns[start:stop] / 1e3, pacer.duration_ns[start:stop] / 1e3])
+    fmu = topic.strip("/")
+    cols = []
+    for name in groups[topic]:
+        if name in master.input_names.get(fmu, []):
+            cols.append(master.record_in[fmu][start:stop, master.input_names[fmu].index(name)])
+        else:
+            cols.append(master.column(fmu, name, start, stop))
+    return np.column_stack(cols)
+
+
 def _log_span(recorder: McapRecorder, master, topology: Topology, start: int, stop: int, dt: float) -> None:
     if stop <= start:
         return
     t = np.arange(start, stop) * dt
-    pacer = getattr(master, "pacer", None)
-    if pacer is not None:
-        recorder.write_block("/master", t, np.column_stack([pacer.lateness_ns[start:stop] / 1e3,
-                                                            pacer.duration_ns[start:stop] / 1e3]))
-    for topic, fields in topology.groups.items():
-        fmu = topic.strip("/")
-        cols = []
-        for name in fields:
-            if name in master.input_names.get(fmu, []):
-                cols.append(master.record_in[fmu][start:stop, master.input_names[fmu].index(name)])
-            else:
-                cols.append(master.column(fmu, name, start, stop))
-        recorder.write_block(topic, t, np.column_stack(cols))
+    if getattr(master, "pacer", None) is not None:
+        recorder.write_block("/master", t, _group_block(master, {}, "/master", start, stop))
+    for topic in topology.groups:
+        recorder.write_block(topic, t, _group_block(master, topology.groups, topic, start, stop))
+
+
+def _start_live(endpoint: tuple[str, int], master, groups: dict, topology: Topology, dt: float, name: str):
+    """The Foxglove server, after the logger is forked and the FMUs are loaded. A step's records are
+    final once the next step has started (the pacer writes a step's duration after it)."""
+    from .live import LivePublisher
+
+    try:
+        publisher = LivePublisher(endpoint, groups, dt, lambda: max(master.k - 1, 0),
+                                  lambda topic, start, stop: _group_block(master, groups, topic, start, stop),
+                                  name=f"pantohil {name} ({topology.name})")
+    except Exception as exc:  # foxglove-sdk raises its own error types for a port in use or a bad host
+        master.close()
+        raise CaseError(f"--live: cannot serve on {endpoint[0]}:{endpoint[1]}: {exc}") from None
+    print(f"live: Foxglove WebSocket server listening on {publisher.url} "
+          f"(per-step channels every {publisher.decimation} steps)", flush=True)
+    return publisher
 
 
 def case_dropper_positions(case: Case) -> list:

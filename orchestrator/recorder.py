@@ -7,8 +7,6 @@ finishes it by itself if the run's process dies, so a run that stops early stays
 from __future__ import annotations
 
 import fcntl
-import json
-import math
 import multiprocessing as mp
 import os
 from pathlib import Path
@@ -16,13 +14,11 @@ from pathlib import Path
 import numpy as np
 from mcap.writer import Writer
 
+from .channels import EVENT_SCHEMAS, RowEncoder, encode_event, event_schema, group_schema, schema_name
 from .pacing import background_priority
 
 
-def _schema(title: str, fields: dict[str, str]) -> bytes:
-    props = {"t": {"type": "number", "description": "simulated time [s]"}}
-    props.update({name: {"type": "number", "description": desc} for name, desc in fields.items()})
-    return json.dumps({"title": title, "type": "object", "properties": props}).encode()
+CHUNK_BYTES = 1 << 18  # a chunk about every span of the default case: `pantohil watch` reads complete chunks
 
 
 class McapWriter:
@@ -30,44 +26,43 @@ class McapWriter:
 
     def __init__(self, path: Path, groups: dict[str, dict[str, str]], metadata: dict[str, str] | None = None):
         self._fh = open(path, "wb")
-        self._writer = Writer(self._fh)
+        self._writer = Writer(self._fh, chunk_size=CHUNK_BYTES)
         self._writer.start(profile="", library="pantohil")
         if metadata:
             self._writer.add_metadata("run", {k: str(v) for k, v in metadata.items()})
         self._channels = {}
-        self._templates = {}
-        self._fields = {topic: list(fields) for topic, fields in groups.items()}
+        self._encoders = {}
         for topic, fields in groups.items():
-            sid = self._writer.register_schema(topic.strip("/"), "jsonschema", _schema(topic, fields))
+            sid = self._writer.register_schema(schema_name(topic), "jsonschema", group_schema(topic, fields))
             self._channels[topic] = self._writer.register_channel(topic, "json", sid)
-            names = ["t", *fields]
-            self._templates[topic] = "{" + ",".join(f'"{n}":%.10g' for n in names) + "}"
+            self._encoders[topic] = RowEncoder(fields)
+        for topic in EVENT_SCHEMAS:  # per-span channels exist from the start, also in a run that stops early
+            self._event_channel(topic)
         self.messages = 0
         self._closed = False
 
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
         """Write rows (t[i], columns[i, :]) as messages of one channel."""
-        channel, template, add = self._channels[topic], self._templates[topic], self._writer.add_message
-        columns = np.asarray(columns, dtype=float)
-        finite = bool(np.isfinite(columns).all())
-        keys = ["t", *self._fields[topic]]
-        for ti, row in zip(t.tolist(), columns.tolist()):
+        channel, add = self._channels[topic], self._writer.add_message
+        for ti, data in zip(np.asarray(t, dtype=float).tolist(), self._encoders[topic].encode(t, columns)):
             ns = int(round(ti * 1e9))
-            if finite:
-                data = (template % (ti, *row)).encode()
-            else:  # JSON has no NaN/inf: write null
-                data = json.dumps(dict(zip(keys, [ti, *[v if math.isfinite(v) else None for v in row]]))).encode()
             add(channel, ns, data, ns)
         self.messages += len(t)
 
-    def write_event(self, topic: str, t: float, record: dict) -> None:
+    def _event_channel(self, topic: str) -> int:
         if topic not in self._channels:
-            sid = self._writer.register_schema(topic.strip("/"), "jsonschema",
-                                               json.dumps({"title": topic, "type": "object"}).encode())
+            sid = self._writer.register_schema(schema_name(topic), "jsonschema", event_schema(topic))
             self._channels[topic] = self._writer.register_channel(topic, "json", sid)
+        return self._channels[topic]
+
+    def write_event(self, topic: str, t: float, record: dict) -> None:
         ns = int(round(t * 1e9))
-        self._writer.add_message(self._channels[topic], ns, json.dumps({"t": t, **record}).encode(), ns)
+        self._writer.add_message(self._event_channel(topic), ns, encode_event(t, record), ns)
         self.messages += 1
+
+    def flush(self) -> None:
+        """Hand what is written to the OS, so that a reader of the growing file sees whole records."""
+        self._fh.flush()
 
     def close(self) -> None:
         if not self._closed:
@@ -94,6 +89,7 @@ def _writer_process(conn, path: str, groups: dict, metadata: dict | None) -> Non
                 writer.write_block(*msg[1:])
             elif msg[0] == "event":
                 writer.write_event(*msg[1:])
+                writer.flush()
             else:
                 break
     finally:

@@ -1,0 +1,141 @@
+"""Live view of a run: a Foxglove WebSocket server (foxglove-sdk) publishing the channels of run.mcap.
+
+The stepping loop does no publishing. A background thread wakes every POLL_S of wall time, reads the
+steps the master has completed since its last wake from the master's records (rows that are never
+written again), and publishes every `decimation`-th step (LIVE_RATE_HZ of simulated time: 10 x
+fewer messages than the log at dt = 1 ms). Span figures are handed over with one deque append per
+span. Every queue is bounded and drops the oldest: at most MAX_ROWS_PER_POLL rows per group and
+wake (a run faster than real time shows the newest ones), SPAN_QUEUE spans, and the server's
+per-client backlog of BACKLOG_MESSAGES messages, so a slow or vanished viewer costs the run nothing.
+"""
+from __future__ import annotations
+
+import collections
+import threading
+from typing import Callable
+
+import numpy as np
+
+from .channels import (EVENT_SCHEMAS, RowEncoder, encode_event, event_schema, group_schema, schema_name,
+                       span_force_record)
+
+LIVE_RATE_HZ = 100.0     # per-step channels, in simulated time (the log keeps every step)
+POLL_S = 0.02            # wall time between two wakes of the publisher thread
+MAX_ROWS_PER_POLL = 200  # per group and wake: 2 s of simulated time at 100 Hz
+SPAN_QUEUE = 8           # spans waiting to be published
+BACKLOG_MESSAGES = 1024  # per client, in the server (foxglove-sdk drops the oldest when full)
+DEFAULT_PORT = 8765      # Foxglove's usual port
+
+Block = Callable[[str, int, int], np.ndarray]  # (topic, start, stop) -> columns of steps start..stop-1
+
+
+def parse_live(value: str | None) -> tuple[str, int]:
+    """--live [HOST:PORT]: loopback and Foxglove's port by default; port 0 picks a free one."""
+    if value is None or value == "":
+        return "127.0.0.1", DEFAULT_PORT
+    host, sep, port = value.rpartition(":")
+    if not sep:
+        host, port = value, str(DEFAULT_PORT)
+    try:
+        number = int(port)
+    except ValueError:
+        raise ValueError(f"--live: expected HOST:PORT, got {value!r}") from None
+    if not 0 <= number <= 65535:
+        raise ValueError(f"--live: port must be 0-65535 (got {number})")
+    return host or "127.0.0.1", number
+
+
+class _Viewers:
+    """foxglove-sdk server listener: notes the first subscription (a viewer is ready)."""
+
+    def __init__(self):
+        self.subscribed = threading.Event()
+
+    def on_subscribe(self, client, channel) -> None:
+        self.subscribed.set()
+
+
+class LivePublisher:
+    """Publishes a run's groups while it steps. `completed()` is the number of steps whose records are
+    final; `block(topic, start, stop)` their columns for a group."""
+
+    def __init__(self, endpoint: tuple[str, int], groups: dict[str, dict[str, str]], dt_s: float,
+                 completed: Callable[[], int], block: Block, name: str = "pantohil"):
+        import foxglove
+
+        self._context = foxglove.Context()
+        self._viewers = _Viewers()
+        self._server = foxglove.start_server(name=name, host=endpoint[0], port=endpoint[1], context=self._context,
+                                             server_listener=self._viewers, message_backlog_size=BACKLOG_MESSAGES)
+        self.host, self.port = endpoint[0], self._server.port
+        self._channels = {topic: self._channel(foxglove, topic, group_schema(topic, fields))
+                          for topic, fields in groups.items()}
+        self._channels.update({topic: self._channel(foxglove, topic, event_schema(topic)) for topic in EVENT_SCHEMAS})
+        self._encoders = {topic: RowEncoder(fields) for topic, fields in groups.items()}
+        self.dt_s = dt_s
+        self.decimation = max(1, int(round(1.0 / (LIVE_RATE_HZ * dt_s))))
+        self._completed, self._block = completed, block
+        self._spans = collections.deque(maxlen=SPAN_QUEUE)
+        self._next_step = 0
+        self.published = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="pantohil-live", daemon=True)
+        self._thread.start()
+
+    def _channel(self, foxglove, topic: str, schema: bytes):
+        return foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name(topic), encoding="jsonschema",
+                                                              data=schema),
+                                message_encoding="json", context=self._context)
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+    def wait_for_viewer(self) -> None:
+        """Block until a client subscribes to a channel (Ctrl-C still stops the wait)."""
+        while not self._viewers.subscribed.wait(0.2):
+            pass
+
+    def span_closed(self, t_s: float, record: dict, force: np.ndarray, previous: np.ndarray | None) -> None:
+        """O(1) in the stepping thread: the arrays are the master's records, read by the publisher."""
+        self._spans.append((t_s, record, force, previous))
+
+    def _loop(self) -> None:
+        while not self._stop.wait(POLL_S):
+            self._publish()
+        self._publish()  # what the run completed last
+
+    def _publish(self) -> None:
+        self._publish_steps(self._completed())
+        while self._spans:
+            t_s, record, force, previous = self._spans.popleft()
+            self._log("/convergence", t_s, encode_event(t_s, record))
+            self._log("/span_force", t_s, encode_event(t_s, span_force_record(record["span"], self.dt_s, force,
+                                                                              previous)))
+
+    def _publish_steps(self, stop: int) -> None:
+        """Every decimation-th step in [next, stop), at most MAX_ROWS_PER_POLL of the newest."""
+        d = self.decimation
+        first = -(-self._next_step // d) * d
+        if first >= stop:
+            return
+        first = max(first, (-(-stop // d) - MAX_ROWS_PER_POLL) * d)
+        steps = np.arange(first, stop, d)
+        t = steps * self.dt_s
+        for topic, encoder in self._encoders.items():
+            columns = self._block(topic, first, stop)[::d]
+            for ti, data in zip(t.tolist(), encoder.encode(t, columns)):
+                self._log(topic, ti, data)
+        self._next_step = stop
+
+    def _log(self, topic: str, t_s: float, data: bytes) -> None:
+        self._channels[topic].log(data, log_time=int(round(t_s * 1e9)))
+        self.published += 1
+
+    def close(self) -> None:
+        """Publish what is left, then stop the server (clients see the connection close)."""
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._thread.join()
+        self._server.stop()
