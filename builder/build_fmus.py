@@ -24,9 +24,10 @@ from pantohil.fmus import fmu_support
 from pantohil.models.case import Case
 from pantohil.models.profile import write_profile_csv
 
+from . import loader
 from .system import FMU_NAMES, loop_latency_steps
 
-BUILDER_VERSION = "10"
+BUILDER_VERSION = "11"
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}
@@ -58,7 +59,7 @@ def fmu_parameters(case: Case, delay_steps: int, rig_address: tuple[str, int] = 
             "dropper_relaxation": case.values["pfem"]["dropper_relaxation"],
         },
         "pantograph": {
-            "model": 1 if pan.model == "rigid_mass" else 0, "n_masses": n,
+            "pantograph_model": 1 if pan.model == "rigid_mass" else 0, "n_masses": n,
             **{f"mass_{i + 1}": masses[i] for i in range(3)},
             **{f"stiffness_{i + 1}": stiff[i] for i in range(3)},
             **{f"damping_{i + 1}": damp[i] for i in range(3)},
@@ -111,10 +112,11 @@ def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
     return files
 
 
-def _digest(name: str, files: list[Path]) -> str:
+def _digest(name: str, files: list[Path], experiment: tuple[float, float], runtime: loader.PythonRuntime) -> str:
     h = hashlib.sha256()
-    h.update(f"{BUILDER_VERSION} {pythonfmu.__version__} {name}".encode())
+    h.update(f"{BUILDER_VERSION} {pythonfmu.__version__} {name} {experiment!r} {runtime.key()}".encode())
     h.update(SCRIPTS[name].read_bytes())
+    h.update(loader.SOURCE.read_bytes())
     for root in files:
         paths = sorted(p for p in ([root] if root.is_file() else root.rglob("*")) if p.is_file())
         for p in paths:
@@ -128,11 +130,28 @@ def _variables(name: str):
     return module.VARIABLES
 
 
-def decorate_model_description(xml_bytes: bytes, variables) -> bytes:
+# What the loader library and the state hooks make true of every pantohil FMU
+CAPABILITIES = {"canHandleVariableCommunicationStepSize": "false", "canGetAndSetFMUstate": "true",
+                "canSerializeFMUstate": "true"}
+
+
+def decorate_model_description(xml_bytes: bytes, variables, experiment: tuple[float, float]) -> bytes:
     """Add unit and display-unit definitions, units, ranges and the generation tool to pythonfmu's
-    modelDescription.xml."""
+    modelDescription.xml; state the fixed step, the default experiment (step, stop time), the state
+    capabilities and the output dependencies (FMI 2.0 sec. 2.2.8: no output depends directly on an
+    input: every output is computed in doStep or read from the state it leaves)."""
     root = ET.fromstring(xml_bytes)
     root.set("generationTool", f"pantohil {_version()} with {root.get('generationTool')}")
+    for key, value in CAPABILITIES.items():
+        root.find("CoSimulation").set(key, value)
+    step_s, stop_s = experiment
+    experiment_el = ET.Element("DefaultExperiment", {"startTime": "0.0", "stopTime": repr(float(stop_s)),
+                                                     "stepSize": repr(float(step_s))})
+    for old in root.findall("DefaultExperiment"):
+        root.remove(old)
+    root.insert(list(root).index(root.find("ModelVariables")), experiment_el)
+    for unknown in root.iterfind("ModelStructure/Outputs/Unknown"):
+        unknown.set("dependencies", "")
     by_name = {v.name: v for v in variables}
     used = sorted({v.unit for v in variables if v.kind == "real"})
     units = ET.Element("UnitDefinitions")
@@ -200,13 +219,32 @@ def _rewrite_zip(path: Path, replace: dict[str, bytes]) -> None:
     path.write_bytes(buf.getvalue())
 
 
+def default_experiment(case: Case) -> tuple[float, float]:
+    """(step, stop time) of an FMU alone: the case's step, and the longest run the case allows."""
+    return case.dt_s, case.values["run"]["max_spans"] * case.samples_per_span * case.dt_s
+
+
+def _add_loader(fmu: Path, xml: bytes, runtime: loader.PythonRuntime, tmp: Path) -> dict[str, bytes]:
+    """The zip entries that put the loader library in front of pythonfmu's (see builder/loader.py)."""
+    root = ET.fromstring(xml)
+    identifier = root.find("CoSimulation").get("modelIdentifier")
+    vr = next(int(sv.get("valueReference")) for sv in root.iter("ScalarVariable") if sv.get("name") == "time_step")
+    binary = f"binaries/{loader.PLATFORM}/{identifier}.so"
+    with zipfile.ZipFile(fmu) as z:
+        inner = z.read(binary)
+    built = loader.compile_loader(identifier, vr, runtime, tmp / "loader" / f"{identifier}.so")
+    return {binary: built.read_bytes(), f"binaries/{loader.PLATFORM}/{identifier}{loader.INNER_SUFFIX}.so": inner}
+
+
 def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path, bool]:
     """Build (or fetch from the cache) one FMU and copy it to dest_dir. Returns (path, cached)."""
+    experiment = default_experiment(case)
+    runtime = loader.python_runtime()
     with tempfile.TemporaryDirectory(prefix=f"pantohil_{name}_") as tmp:
         stage = Path(tmp) / "stage"
         stage.mkdir()
         files = _stage(name, params, case, stage)
-        key = _digest(name, files)
+        key = _digest(name, files, experiment, runtime)
         cached = cache_root() / "fmus" / key / f"{CLASS_NAMES[name]}.fmu"
         hit = cached.exists()
         if not hit:
@@ -223,7 +261,8 @@ def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path
                                                      documentation_folder=doc)
             with zipfile.ZipFile(fmu) as z:
                 xml = z.read("modelDescription.xml")
-            _rewrite_zip(fmu, {"modelDescription.xml": decorate_model_description(xml, variables)})
+            _rewrite_zip(fmu, {"modelDescription.xml": decorate_model_description(xml, variables, experiment),
+                               **_add_loader(fmu, xml, runtime, Path(tmp))})
             cached.parent.mkdir(parents=True, exist_ok=True)
             part = cached.with_suffix(".fmu.part")
             shutil.copy2(fmu, part)

@@ -6,11 +6,14 @@ FMU alone (in any master) reproduces the case; a master may still set parameters
 """
 from __future__ import annotations
 
+import copy
+import io
 import json
+import pickle
 from dataclasses import dataclass
 from pathlib import Path
 
-from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Variability, Integer, Real, String
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
 
 PARAMETERS_FILE = "parameters.json"
 REQUIREMENTS_FILE = "requirements.txt"  # what `pythonfmu deploy` installs on a host
@@ -65,3 +68,91 @@ def register_all(slave, variables: list[Var]) -> None:
                       variability=Fmi2Variability.continuous if var.kind == "real" else Fmi2Variability.discrete)
         cls = {"real": Real, "integer": Integer, "boolean": Boolean, "string": String}[var.kind]
         slave.register_variable(cls(var.name, description=desc, **kw), nested=False)
+
+
+STATE_FORMAT = b"pantohil-fmu-state 1\n"
+# Attributes of every pythonfmu slave that describe the instance, not the simulation
+_INSTANCE_ATTRIBUTES = frozenset({"vars", "log_queue", "instance_name", "resources", "visible", "guid", "author",
+                                  "license", "version", "copyright", "modelName", "description",
+                                  "default_experiment"})
+
+
+class StateError(ValueError):
+    """A serialized FMU state that this FMU cannot take back."""
+
+
+@dataclass
+class FmuState:
+    """A state taken by fmi2GetFMUstate: copies of the slave's attributes, and (not copied) the constants
+    they refer to, by name."""
+    owner: str
+    items: dict
+    constants: dict
+
+
+@dataclass
+class SerializedFmuState:
+    """A state read by fmi2DeSerializeFMUstate, resolved against the instance's constants when set."""
+    data: bytes
+
+
+class PantohilSlave(Fmi2Slave):
+    """An FMU whose whole state can be taken and put back (fmi2GetFMUstate/fmi2SetFMUstate) and serialized
+    (fmi2SerializeFMUstate/fmi2DeSerializeFMUstate), through pythonfmu's state hooks.
+
+    The state is every attribute of the slave except the instance's identity, `transient` attributes
+    (sockets) and objects that `constants()` names: data fixed at initialisation (operators, profiles),
+    shared between the live instance and its states and left out of serialized states, so that a
+    state is small and a serialized one is taken back only by an instance initialised with the same
+    case. pythonfmu calls the (de)serialization hooks on the class, hence the static methods."""
+
+    transient: tuple[str, ...] = ()
+
+    def constants(self) -> dict[str, object]:
+        """Name -> object fixed after initialisation: not copied into states."""
+        return {}
+
+    def _get_fmu_state(self) -> FmuState:
+        skip = _INSTANCE_ATTRIBUTES | set(self.transient)
+        items = {k: v for k, v in self.__dict__.items() if k not in skip}
+        constants = self.constants()
+        return FmuState(type(self).__name__, copy.deepcopy(items, {id(o): o for o in constants.values()}), constants)
+
+    def _set_fmu_state(self, state) -> None:
+        if isinstance(state, SerializedFmuState):
+            state = self._resolve(state)
+        constants = self.constants()
+        self.__dict__.update(copy.deepcopy(state.items, {id(o): o for o in constants.values()}))
+
+    @staticmethod
+    def _fmu_state_to_bytes(state: FmuState) -> bytes:
+        by_id = {id(obj): name for name, obj in state.constants.items()}
+        buf = io.BytesIO()
+        buf.write(STATE_FORMAT)
+        pickler = pickle.Pickler(buf, protocol=pickle.HIGHEST_PROTOCOL)
+        pickler.persistent_id = lambda obj: by_id.get(id(obj))
+        pickler.dump((state.owner, state.items))
+        return buf.getvalue()
+
+    @staticmethod
+    def _fmu_state_from_bytes(data: bytes) -> SerializedFmuState:
+        data = bytes(data)
+        if not data.startswith(STATE_FORMAT):
+            raise StateError(f"not a pantohil FMU state (format {STATE_FORMAT!r} expected)")
+        return SerializedFmuState(data)
+
+    def _resolve(self, state: SerializedFmuState) -> FmuState:
+        constants = self.constants()
+
+        def constant(name):
+            if name not in constants:
+                raise StateError(f"{type(self).__name__}: the state refers to {name!r}, which this instance lacks "
+                                 "(initialise it with the same case before setting the state)")
+            return constants[name]
+
+        unpickler = pickle.Unpickler(io.BytesIO(state.data[len(STATE_FORMAT):]))
+        unpickler.persistent_load = constant
+        owner, items = unpickler.load()
+        if owner != type(self).__name__:
+            raise StateError(f"{type(self).__name__}: the state is of a {owner} FMU")
+        return FmuState(owner, items, constants)

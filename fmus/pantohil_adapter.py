@@ -15,10 +15,8 @@ import socket
 import time
 from collections import OrderedDict
 
-from pythonfmu import Fmi2Slave
-
 from pantohil.fmus import udp_protocol as proto
-from pantohil.fmus.fmu_support import Var, register_all
+from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
 from pantohil.models.actuator import ActuatorLimits, Limiter
 
 LINK_OK, LINK_DEGRADED, LINK_FAULT = 0, 1, 2
@@ -53,9 +51,10 @@ VARIABLES = [
 ]
 
 
-class PantohilAdapter(Fmi2Slave):
+class PantohilAdapter(PantohilSlave):
     author = "pantohil"
     description = "Hardware adapter: UDP link from the catenary model to a HIL rig controller, with actuator limits."
+    transient = ("_sock",)  # a state restores the counters and the limiter, not the socket
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)

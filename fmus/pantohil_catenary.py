@@ -7,9 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from pythonfmu import Fmi2Slave
-
-from pantohil.fmus.fmu_support import Var, register_all
+from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
 from pantohil.models.asm import AsmParameters
 from pantohil.models.hil import UPDATES, HilSettings, PeriodicHil
 from pantohil.models.operator_file import load_operators
@@ -54,7 +52,7 @@ VARIABLES = [
 ]
 
 
-class PantohilCatenary(Fmi2Slave):
+class PantohilCatenary(PantohilSlave):
     author = "pantohil"
     description = ("Periodic catenary (ASM2 analytical string, Gil et al. Papers A-B, or PFEM with dropper "
                    "slackening, Papers C-D) for steady-state HIL "
@@ -65,6 +63,12 @@ class PantohilCatenary(Fmi2Slave):
         self._hil = None
         self._pfem = False
         register_all(self, VARIABLES)
+
+    def constants(self) -> dict[str, object]:
+        """The operators, the profile and what the iteration precomputes from them (fixed after initialisation)."""
+        if self._hil is None:
+            return {}
+        return {"profile": self._z0, **{f"hil.{a}": getattr(self._hil, a) for a in self._hil.CONSTANT_ATTRIBUTES}}
 
     def exit_initialization_mode(self):
         n = int(self.samples_per_span)

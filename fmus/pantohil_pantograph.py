@@ -2,13 +2,11 @@
 or a rigid mass on the actuator (Paper A sec. 2, Paper B sec. 5.1)."""
 from __future__ import annotations
 
-from pythonfmu import Fmi2Slave
-
-from pantohil.fmus.fmu_support import Var, register_all
+from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
 from pantohil.models.pantograph import PantographParameters, make_pantograph
 
 VARIABLES = [
-    Var("model", "integer", "parameter", "1", "0: mass chain with penalty contact, 1: rigid mass on the actuator", 0, 0, 1),
+    Var("pantograph_model", "integer", "parameter", "1", "0: mass chain with penalty contact, 1: rigid mass on the actuator", 0, 0, 1),
     Var("n_masses", "integer", "parameter", "1", "Masses in the chain, head first", 3, 1, 3),
     *[Var(f"mass_{i}", "real", "parameter", "kg", f"Mass {i}", m, 0.0) for i, m in zip((1, 2, 3), (6.6, 5.8, 5.8))],
     *[Var(f"stiffness_{i}", "real", "parameter", "N/m", f"Element {i} stiffness (mass {i} to mass {i + 1} or ground)", k, 0.0)
@@ -27,7 +25,7 @@ VARIABLES = [
 ]
 
 
-class PantohilPantograph(Fmi2Slave):
+class PantohilPantograph(PantohilSlave):
     author = "pantohil"
     description = "Lumped pantograph (Paper A Table A.3 chain, HHT alpha=-0.05) with penalty contact and contact loss."
 
@@ -37,10 +35,10 @@ class PantohilPantograph(Fmi2Slave):
         self._model = None
 
     def exit_initialization_mode(self):
-        n = int(self.n_masses) if self.model == 0 else 1
+        n = int(self.n_masses) if self.pantograph_model == 0 else 1
         pick = lambda stem: tuple(float(getattr(self, f"{stem}_{i}")) for i in range(1, n + 1))
         params = PantographParameters(pick("mass"), pick("stiffness"), pick("damping"), self.contact_stiffness,
-                                      self.uplift_force, "rigid_mass" if self.model == 1 else "chain", self.gravity)
+                                      self.uplift_force, "rigid_mass" if self.pantograph_model == 1 else "chain", self.gravity)
         self._model = make_pantograph(params, self.time_step, self.reference_height)
         self.contact_force = self._model.settle(self.height)
         self._publish()

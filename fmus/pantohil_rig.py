@@ -2,9 +2,7 @@
 filter, force offset and noise (Paper B sec. 4, Paper D secs. 2 and 5.1)."""
 from __future__ import annotations
 
-from pythonfmu import Fmi2Slave
-
-from pantohil.fmus.fmu_support import Var, register_all
+from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
 from pantohil.models.rig import Rig, RigParameters
 
 VARIABLES = [
@@ -25,7 +23,7 @@ VARIABLES = [
 ]
 
 
-class PantohilRig(Fmi2Slave):
+class PantohilRig(PantohilSlave):
     author = "pantohil"
     description = "HIL rig between model and pantograph: delay, N_com decimation with linear drive ramp, servo, load cell."
 

@@ -30,6 +30,8 @@ class PeriodicHil:
     `z0` is the (frequency-reduced) wire height at the N samples.
     """
 
+    CONSTANT_ATTRIBUTES = ("op", "z0", "s")  # fixed after construction (not part of an FMU state)
+
     def __init__(self, operator, z0: np.ndarray, settings: HilSettings):
         if settings.update not in UPDATES:
             raise ValueError(f"hil.update must be one of {UPDATES}, got {settings.update!r}")

@@ -16,6 +16,10 @@ from .receptance import reduce_harmonics
 
 
 class PfemHil:
+    # fixed after construction (not part of an FMU state)
+    CONSTANT_ATTRIBUTES = ("ops", "s", "z0", "_dc", "_dd", "_basis", "f0", "kd", "win", "_d", "_window_index",
+                           "_basis_at", "_dd_at", "_slack_below")
+
     def __init__(self, ops: PfemOperators, settings: HilSettings, dropper_relaxation: float = 1.0,
                  droppers: bool = True):
         if settings.update not in UPDATES:

@@ -1,0 +1,323 @@
+/* pantohil FMU loader: the FMU's binaries/<platform>/<modelIdentifier> library.
+
+   pythonfmu's library runs the FMU's Python class in an embedded interpreter but does not link
+   libpython: a host without Python of its own fails with "undefined symbol: _Py_NoneStruct", and
+   libpython's extension modules (numpy) need its symbols global. This library, compiled by
+   `pantohil build` for each FMU, therefore
+   - opens libpython with RTLD_GLOBAL when the process has no Python yet (PANTOHIL_LIBPYTHON, or the
+     path recorded at build time), and sets PYTHONHOME / PYTHONPATH (if unset) to the interpreter and
+     site-packages that numpy and scipy came from at build time;
+   - then opens pythonfmu's library (PANTOHIL_INNER, next to this one) and forwards every FMI 2.0
+     call to it;
+   - enforces the fixed communication step (canHandleVariableCommunicationStepSize="false"): a doStep
+     whose step differs from the FMU's time_step parameter returns fmi2Error with a logged message;
+   - always passes the embedded Python's error messages to the host's logger (pythonfmu drops them
+     unless logging is on), so that a missing module is named.
+   Compile-time definitions: PANTOHIL_LIBPYTHON, PANTOHIL_PYTHONHOME, PANTOHIL_PYTHONPATH,
+   PANTOHIL_INNER, PANTOHIL_TIME_STEP_VR. */
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+
+#define MESSAGE_SIZE 4096
+
+typedef struct {
+    fmi2Component inner;
+    fmi2CallbackFunctions host;     /* the host's callbacks */
+    fmi2CallbackFunctions wrapped;  /* what pythonfmu's library gets: our logger */
+    char *name;
+    int host_logging;
+    double time_step_s;             /* the only communication step this FMU takes (0: not known yet) */
+} Instance;
+
+/* pythonfmu's FMI functions, resolved once */
+static struct {
+    void *lib;
+    fmi2InstantiateTYPE *instantiate;
+    fmi2FreeInstanceTYPE *free_instance;
+    fmi2SetDebugLoggingTYPE *set_debug_logging;
+    fmi2SetupExperimentTYPE *setup_experiment;
+    fmi2EnterInitializationModeTYPE *enter_initialization_mode;
+    fmi2ExitInitializationModeTYPE *exit_initialization_mode;
+    fmi2TerminateTYPE *terminate;
+    fmi2ResetTYPE *reset;
+    fmi2GetRealTYPE *get_real;
+    fmi2GetIntegerTYPE *get_integer;
+    fmi2GetBooleanTYPE *get_boolean;
+    fmi2GetStringTYPE *get_string;
+    fmi2SetRealTYPE *set_real;
+    fmi2SetIntegerTYPE *set_integer;
+    fmi2SetBooleanTYPE *set_boolean;
+    fmi2SetStringTYPE *set_string;
+    fmi2GetFMUstateTYPE *get_fmu_state;
+    fmi2SetFMUstateTYPE *set_fmu_state;
+    fmi2FreeFMUstateTYPE *free_fmu_state;
+    fmi2SerializedFMUstateSizeTYPE *serialized_fmu_state_size;
+    fmi2SerializeFMUstateTYPE *serialize_fmu_state;
+    fmi2DeSerializeFMUstateTYPE *deserialize_fmu_state;
+    fmi2GetDirectionalDerivativeTYPE *get_directional_derivative;
+    fmi2SetRealInputDerivativesTYPE *set_real_input_derivatives;
+    fmi2GetRealOutputDerivativesTYPE *get_real_output_derivatives;
+    fmi2DoStepTYPE *do_step;
+    fmi2CancelStepTYPE *cancel_step;
+    fmi2GetStatusTYPE *get_status;
+    fmi2GetRealStatusTYPE *get_real_status;
+    fmi2GetIntegerStatusTYPE *get_integer_status;
+    fmi2GetBooleanStatusTYPE *get_boolean_status;
+    fmi2GetStringStatusTYPE *get_string_status;
+} py;
+
+static void say(const fmi2CallbackFunctions *cb, fmi2String name, fmi2Status status, const char *fmt, ...) {
+    char text[MESSAGE_SIZE];
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(text, sizeof text, fmt, args);
+    va_end(args);
+    if (cb != NULL && cb->logger != NULL)
+        cb->logger(cb->componentEnvironment, name, status, "logStatusError", "%s", text);
+    else
+        fprintf(stderr, "%s: %s\n", name ? name : "pantohil FMU", text);
+}
+
+/* pythonfmu's messages: errors always reach the host, the rest only when the host asked for logging */
+static void relay(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
+                  fmi2String message, ...) {
+    Instance *inst = (Instance *)env;
+    char text[MESSAGE_SIZE];
+    va_list args;
+    if (!inst->host_logging && status < fmi2Error)
+        return;
+    va_start(args, message);
+    vsnprintf(text, sizeof text, message, args);
+    va_end(args);
+    if (inst->host.logger != NULL)
+        inst->host.logger(inst->host.componentEnvironment, name, status, category, "%s", text);
+}
+
+static void set_default_env(const char *name, const char *value) {
+    if (value[0] != '\0' && getenv(name) == NULL)
+        setenv(name, value, 0);
+}
+
+/* libpython with global symbols, unless the process already has an interpreter (a Python host) */
+static int load_python(const fmi2CallbackFunctions *cb, fmi2String name) {
+    const char *path;
+    if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") != NULL)
+        return 1;
+    path = getenv("PANTOHIL_LIBPYTHON");
+    if (path == NULL || path[0] == '\0')
+        path = PANTOHIL_LIBPYTHON;
+    if (path[0] == '\0') {
+        say(cb, name, fmi2Error, "pantohil FMU needs libpython 3.%s with numpy and scipy: set PANTOHIL_LIBPYTHON "
+            "to its path (this FMU was built by a Python without a shared libpython)", PANTOHIL_PY_MINOR);
+        return 0;
+    }
+    if (dlopen(path, RTLD_NOW | RTLD_GLOBAL) == NULL) {
+        say(cb, name, fmi2Error, "pantohil FMU needs libpython 3.%s with numpy and scipy: cannot open %s (%s); "
+            "set PANTOHIL_LIBPYTHON to its path", PANTOHIL_PY_MINOR, path, dlerror());
+        return 0;
+    }
+    set_default_env("PYTHONHOME", PANTOHIL_PYTHONHOME);
+    set_default_env("PYTHONPATH", PANTOHIL_PYTHONPATH);
+    return 1;
+}
+
+#define RESOLVE(field, symbol)                                                          \
+    if ((py.field = (symbol##TYPE *)dlsym(py.lib, #symbol)) == NULL) {                  \
+        say(cb, name, fmi2Error, "pantohil FMU: %s lacks %s", inner_path, #symbol);     \
+        return 0;                                                                       \
+    }
+
+static int resolve_all(const fmi2CallbackFunctions *cb, fmi2String name, const char *inner_path) {
+    RESOLVE(instantiate, fmi2Instantiate) RESOLVE(free_instance, fmi2FreeInstance)
+    RESOLVE(set_debug_logging, fmi2SetDebugLogging) RESOLVE(setup_experiment, fmi2SetupExperiment)
+    RESOLVE(enter_initialization_mode, fmi2EnterInitializationMode)
+    RESOLVE(exit_initialization_mode, fmi2ExitInitializationMode)
+    RESOLVE(terminate, fmi2Terminate) RESOLVE(reset, fmi2Reset)
+    RESOLVE(get_real, fmi2GetReal) RESOLVE(get_integer, fmi2GetInteger)
+    RESOLVE(get_boolean, fmi2GetBoolean) RESOLVE(get_string, fmi2GetString)
+    RESOLVE(set_real, fmi2SetReal) RESOLVE(set_integer, fmi2SetInteger)
+    RESOLVE(set_boolean, fmi2SetBoolean) RESOLVE(set_string, fmi2SetString)
+    RESOLVE(get_fmu_state, fmi2GetFMUstate) RESOLVE(set_fmu_state, fmi2SetFMUstate)
+    RESOLVE(free_fmu_state, fmi2FreeFMUstate) RESOLVE(serialized_fmu_state_size, fmi2SerializedFMUstateSize)
+    RESOLVE(serialize_fmu_state, fmi2SerializeFMUstate) RESOLVE(deserialize_fmu_state, fmi2DeSerializeFMUstate)
+    RESOLVE(get_directional_derivative, fmi2GetDirectionalDerivative)
+    RESOLVE(set_real_input_derivatives, fmi2SetRealInputDerivatives)
+    RESOLVE(get_real_output_derivatives, fmi2GetRealOutputDerivatives)
+    RESOLVE(do_step, fmi2DoStep) RESOLVE(cancel_step, fmi2CancelStep) RESOLVE(get_status, fmi2GetStatus)
+    RESOLVE(get_real_status, fmi2GetRealStatus) RESOLVE(get_integer_status, fmi2GetIntegerStatus)
+    RESOLVE(get_boolean_status, fmi2GetBooleanStatus) RESOLVE(get_string_status, fmi2GetStringStatus)
+    return 1;
+}
+
+static int load_inner(const fmi2CallbackFunctions *cb, fmi2String name) {
+    Dl_info self;
+    char path[4096];
+    const char *slash;
+    if (py.lib != NULL)
+        return 1;
+    if (!load_python(cb, name))
+        return 0;
+    if (dladdr((void *)&load_inner, &self) == 0 || (slash = strrchr(self.dli_fname, '/')) == NULL) {
+        say(cb, name, fmi2Error, "pantohil FMU: cannot tell where its library is");
+        return 0;
+    }
+    snprintf(path, sizeof path, "%.*s/%s", (int)(slash - self.dli_fname), self.dli_fname, PANTOHIL_INNER);
+    if ((py.lib = dlopen(path, RTLD_NOW | RTLD_LOCAL)) == NULL) {
+        say(cb, name, fmi2Error, "pantohil FMU: cannot open %s (%s)", path, dlerror());
+        return 0;
+    }
+    if (!resolve_all(cb, name, path)) {
+        py.lib = NULL;
+        return 0;
+    }
+    return 1;
+}
+
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String resources,
+                              const fmi2CallbackFunctions *callbacks, fmi2Boolean visible, fmi2Boolean logging) {
+    Instance *inst;
+    if (!load_inner(callbacks, name))
+        return NULL;
+    inst = (Instance *)calloc(1, sizeof *inst);
+    if (inst == NULL)
+        return NULL;
+    inst->host = *callbacks;
+    inst->wrapped = *callbacks;
+    inst->wrapped.logger = relay;
+    inst->wrapped.componentEnvironment = inst;
+    inst->host_logging = logging;
+    inst->name = strdup(name ? name : "");
+    inst->inner = py.instantiate(name, type, guid, resources, &inst->wrapped, visible, fmi2True);
+    if (inst->inner == NULL) {
+        say(callbacks, name, fmi2Error, "pantohil FMU: its Python class could not be created (see the message "
+            "before); the embedded Python needs numpy and scipy (PYTHONHOME=%s, PYTHONPATH=%s)",
+            getenv("PYTHONHOME") ? getenv("PYTHONHOME") : "(unset)", getenv("PYTHONPATH") ? getenv("PYTHONPATH") : "(unset)");
+        free(inst->name);
+        free(inst);
+        return NULL;
+    }
+    return inst;
+}
+
+#define INNER(c) (((Instance *)(c))->inner)
+
+void fmi2FreeInstance(fmi2Component c) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL)
+        return;
+    py.free_instance(inst->inner);
+    free(inst->name);
+    free(inst);
+}
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[]) {
+    ((Instance *)c)->host_logging = on;
+    return py.set_debug_logging(INNER(c), fmi2True, n, categories);
+}
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_defined, fmi2Real tol, fmi2Real start,
+                               fmi2Boolean stop_defined, fmi2Real stop) {
+    return py.setup_experiment(INNER(c), tol_defined, tol, start, stop_defined, stop);
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) { return py.enter_initialization_mode(INNER(c)); }
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    Instance *inst = (Instance *)c;
+    const fmi2ValueReference vr = PANTOHIL_TIME_STEP_VR;
+    fmi2Status status = py.exit_initialization_mode(inst->inner);
+    if (status <= fmi2Warning && py.get_real(inst->inner, &vr, 1, &inst->time_step_s) > fmi2Warning)
+        inst->time_step_s = 0.0;
+    return status;
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_set_prior) {
+    Instance *inst = (Instance *)c;
+    double dt = inst->time_step_s;
+    if (dt > 0.0 && fabs(h - dt) > 1e-9 * dt) {
+        say(&inst->host, inst->name, fmi2Error, "doStep at t = %.9g s with a communication step of %.9g s: this "
+            "FMU takes only its fixed step of %.9g s (parameter time_step)", t, h, dt);
+        return fmi2Error;
+    }
+    return py.do_step(inst->inner, t, h, no_set_prior);
+}
+
+fmi2Status fmi2Terminate(fmi2Component c) { return py.terminate(INNER(c)); }
+fmi2Status fmi2Reset(fmi2Component c) { ((Instance *)c)->time_step_s = 0.0; return py.reset(INNER(c)); }
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
+    return py.get_real(INNER(c), vr, n, v);
+}
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
+    return py.get_integer(INNER(c), vr, n, v);
+}
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) {
+    return py.get_boolean(INNER(c), vr, n, v);
+}
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]) {
+    return py.get_string(INNER(c), vr, n, v);
+}
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
+    return py.set_real(INNER(c), vr, n, v);
+}
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]) {
+    return py.set_integer(INNER(c), vr, n, v);
+}
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]) {
+    return py.set_boolean(INNER(c), vr, n, v);
+}
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[]) {
+    return py.set_string(INNER(c), vr, n, v);
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) { return py.get_fmu_state(INNER(c), s); }
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) { return py.set_fmu_state(INNER(c), s); }
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) { return py.free_fmu_state(INNER(c), s); }
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *size) {
+    return py.serialized_fmu_state_size(INNER(c), s, size);
+}
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte bytes[], size_t size) {
+    return py.serialize_fmu_state(INNER(c), s, bytes, size);
+}
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *s) {
+    return py.deserialize_fmu_state(INNER(c), bytes, size, s);
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
+                                        const fmi2ValueReference z[], size_t nz, const fmi2Real dv[], fmi2Real dz[]) {
+    return py.get_directional_derivative(INNER(c), u, nu, z, nz, dv, dz);
+}
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                       const fmi2Integer order[], const fmi2Real v[]) {
+    return py.set_real_input_derivatives(INNER(c), vr, n, order, v);
+}
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                        const fmi2Integer order[], fmi2Real v[]) {
+    return py.get_real_output_derivatives(INNER(c), vr, n, order, v);
+}
+fmi2Status fmi2CancelStep(fmi2Component c) { return py.cancel_step(INNER(c)); }
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) {
+    return py.get_status(INNER(c), k, v);
+}
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
+    return py.get_real_status(INNER(c), k, v);
+}
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) {
+    return py.get_integer_status(INNER(c), k, v);
+}
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v) {
+    return py.get_boolean_status(INNER(c), k, v);
+}
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) {
+    return py.get_string_status(INNER(c), k, v);
+}
