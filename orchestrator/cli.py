@@ -50,6 +50,12 @@ def _parser() -> argparse.ArgumentParser:
                      help="with --live: start stepping once a viewer has subscribed to a channel")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
+    watch = sub.add_parser("watch", help="follow a run's log as it is written: convergence, span force, newest "
+                                         "values (a terminal view; Foxglove users: `run --live`)")
+    watch.add_argument("folder", type=Path, help="run folder (the --out of `pantohil run`)")
+    watch.add_argument("--interval", type=float, default=0.5, metavar="S", help="seconds between reads (default 0.5)")
+    watch.add_argument("--once", action="store_true", help="show what the log holds now and exit")
+
     emu = sub.add_parser("rig-emulator", help="play a rig controller over UDP for a case (lockstep, fault injection)")
     emu.add_argument("--listen", required=True, metavar="HOST:PORT", help="address to listen on")
     emu.add_argument("--case", type=Path, help="case file (TOML); default: the built-in case")
@@ -207,6 +213,15 @@ def _live_endpoint(value: str) -> tuple[str, int]:
     except OSError as exc:
         raise CaseError(f"--live: cannot listen on {host}:{port} ({exc.strerror})") from None
     return host, port
+
+
+def _cmd_watch(args) -> int:
+    from pantohil.orchestrator.watch import watch
+
+    try:
+        return watch(args.folder, args.interval, args.once)
+    except KeyboardInterrupt:
+        return 130
 
 
 def _cmd_emulator(args) -> int:
@@ -398,7 +413,7 @@ def main(argv: list[str] | None = None) -> int:
     handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
                "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary, "example": _cmd_example,
                "fem-sim": _cmd_fem_sim, "compare": _cmd_compare, "stability": _cmd_stability,
-               "sweep": _cmd_sweep}[args.command]
+               "sweep": _cmd_sweep, "watch": _cmd_watch}[args.command]
     try:
         return handler(args)
     except CaseError as exc:

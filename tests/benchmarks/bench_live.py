@@ -1,4 +1,4 @@
-"""Cost of the live view (issue 20, acceptance 2 and 3): the default virtual run without --live, with
+"""Cost of the live view: the default virtual run without --live, with
 --live and one subscribed client that reads everything, and with --live and a client that subscribes
 and then stops reading. Runs are interleaved (A B C A B C ...) on a shared machine; prints the median,
 min and max of the real-time factor, the wall time per step and the run process's peak resident

@@ -1,0 +1,87 @@
+"""Follow a growing MCAP file (run.mcap while its writer process adds to it): each poll returns the
+messages of the records that are complete in the file, and remembers where the next record starts.
+
+The framing of MCAP records (opcode: 1 byte, length: uint64 little-endian, then the content) tells
+where a complete record ends; the records themselves (chunks, schemas, channels, messages) are read
+by the mcap library.
+"""
+from __future__ import annotations
+
+import io
+import json
+import struct
+from pathlib import Path
+
+from mcap.exceptions import EndOfFile, McapError
+from mcap.records import Channel, Chunk, Footer, Message, Metadata
+from mcap.stream_reader import StreamReader
+
+MAGIC = b"\x89MCAP0\r\n"
+_HEADER = struct.Struct("<BQ")
+
+
+class McapFollowError(ValueError):
+    pass
+
+
+def complete_records_end(data: bytes, start: int) -> tuple[int, bool]:
+    """Offset after the last complete record of data[start:], and whether the footer is among them."""
+    offset, footer = start, False
+    while offset + _HEADER.size <= len(data):
+        opcode, length = _HEADER.unpack_from(data, offset)
+        end = offset + _HEADER.size + length
+        if end > len(data):
+            break
+        offset, footer = end, footer or opcode == 0x02
+    return offset, footer
+
+
+class McapFollower:
+    """`poll()` -> [(topic, log_time_ns, decoded JSON message)] new since the last poll."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.offset = 0
+        self.finished = False
+        self.metadata: dict[str, str] = {}
+        self._topics: dict[int, str] = {}
+
+    def poll(self) -> list[tuple[str, int, dict]]:
+        if self.finished:
+            return []
+        with open(self.path, "rb") as f:
+            f.seek(self.offset)
+            data = f.read()
+        start = 0
+        if self.offset == 0:
+            if len(data) < len(MAGIC):
+                return []
+            if not data.startswith(MAGIC):
+                raise McapFollowError(f"{self.path} is not an MCAP file")
+            start = len(MAGIC)
+        end, footer = complete_records_end(data, start)
+        if end == start:
+            self.offset += start
+            return []
+        messages = self._read(data[start:end])
+        self.offset += end
+        self.finished = footer
+        return messages
+
+    def _read(self, records: bytes) -> list[tuple[str, int, dict]]:
+        out = []
+        try:
+            for record in StreamReader(io.BytesIO(records), skip_magic=True).records:
+                if isinstance(record, Channel):
+                    self._topics[record.id] = record.topic
+                elif isinstance(record, Message) and record.channel_id in self._topics:
+                    out.append((self._topics[record.channel_id], record.log_time, json.loads(record.data)))
+                elif isinstance(record, Metadata) and record.name == "run":
+                    self.metadata = dict(record.metadata)
+                elif isinstance(record, (Footer, Chunk)):
+                    continue
+        except EndOfFile:  # the stream of complete records ends without the file's closing magic
+            pass
+        except McapError as exc:
+            raise McapFollowError(f"{self.path}: {exc}") from None
+        return out
