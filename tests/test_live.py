@@ -96,3 +96,41 @@ def test_every_topic_of_the_layout_is_in_a_recorded_run(default_run):
     schemas, _ = _mcap(default_run / "run.mcap")
     assert {"/span_force", "/convergence", "/catenary", "/rig", "/pantograph"} <= topics
     assert topics <= set(schemas), f"layout topics not in run.mcap: {topics - set(schemas)}"
+
+
+def _subscribe_all(ws) -> set[str]:
+    """Subscribe to every advertised channel; the topics."""
+    channels = []
+    while not channels:
+        msg = json.loads(ws.recv())
+        channels = msg.get("channels", []) if msg["op"] == "advertise" else []
+    ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": c["id"]}
+                                                             for i, c in enumerate(channels, 1)]}))
+    return {c["topic"] for c in channels}
+
+
+def test_rig_run_with_a_stalled_viewer_ends_normally_and_logs_the_rig_layout_topics(tmp_path):
+    emulator = subprocess.Popen([sys.executable, "-m", "pantohil.orchestrator.cli", "rig-emulator", "--listen",
+                                 "127.0.0.1:0", "--rt-priority", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+    try:
+        line = emulator.stdout.readline()
+        assert "listening on" in line, emulator.stderr.read()
+        rig = line.split("listening on ")[1].split()[0]
+        out = tmp_path / "rig"
+        proc, url = _start_live_run(out, "--hardware", rig, "--realtime", "--rt-priority", "0",
+                                    "--set", "run.max_spans=3")
+        # a viewer that subscribes and never reads again: its socket and the server's backlog fill up
+        with websockets_sync.connect(url, subprotocols=["foxglove.sdk.v1"], max_size=None, max_queue=1) as ws:
+            advertised = _subscribe_all(ws)
+            _, err = proc.communicate(timeout=600)
+    finally:
+        emulator.terminate()
+        emulator.wait(timeout=60)
+    assert proc.returncode in (0, 1), err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["spans"] == 3 and summary["link"]["lost"] == 0
+    schemas, _ = _mcap(out / "run.mcap")
+    assert advertised == set(schemas) and {"/adapter", "/master"} <= advertised
+    layout = json.loads((ROOT / "docs" / "foxglove" / "pantohil-rig-layout.json").read_text())
+    assert layout_topics(layout) <= set(schemas), layout_topics(layout) - set(schemas)
