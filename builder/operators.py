@@ -18,7 +18,7 @@ from pantohil.models import catenary_def, fe_catenary, operator_file, pfem, pfem
 from pantohil.models.case import Case
 from pantohil.models.catenary_def import load_definition
 from pantohil.models.operator_file import FORMAT_VERSION, load_operators, save_operators
-from pantohil.models.pfem_blocks import catenary_block
+from pantohil.models.pfem_blocks import periodic_block
 from pantohil.models.pfem_operators import build_operators
 
 from .build_fmus import cache_root
@@ -58,7 +58,7 @@ def case_operators(case: Case, progress: bool = True) -> OperatorBuild:
         ops = load_operators(path, key)  # refuses a corrupt or mismatched entry with one line
         return OperatorBuild(path, True, time.perf_counter() - t0, int(ops.info.get("n_frequencies", 0)),
                              path.stat().st_size, key)
-    cb = catenary_block(load_definition(case.definition_path))
+    cb = periodic_block(load_definition(case.definition_path), case.samples_per_span)
     with tqdm(total=1, unit="freq", desc="PFEM operators", disable=None if progress else True, leave=False) as bar:
         def tick(done, total):
             bar.total = total

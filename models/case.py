@@ -390,11 +390,6 @@ def build_case(raw: dict, source: Path) -> Case:
             raise CaseError("catenary.definition_file: required when catenary.model = \"pfem\" (the span to model)")
         definition = (source.parent / c["definition_file"]).resolve()
         _analysis(source, c["definition_file"], "catenary.definition_file")  # a readable, form-findable file
-        from .catenary_def import load_definition
-
-        if load_definition(definition).stitch is not None:
-            raise CaseError("catenary.definition_file: a PFEM block of a stitched catenary is not supported yet "
-                            "(its stitch wire crosses the block boundary)")
         if v["pfem"]["omega_max_rad_s"] > math.pi / dt:
             raise CaseError(f"pfem.omega_max_rad_s: {v['pfem']['omega_max_rad_s']:g} rad/s is above the Nyquist "
                             f"frequency pi/dt = {math.pi / dt:.1f} rad/s")

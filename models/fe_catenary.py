@@ -37,10 +37,11 @@ def beam_matrices(L: float, wire: Wire):
     return kb + kg, me, q
 
 
-def _grid(cat: CatenaryDefinition, n_spans: int) -> np.ndarray:
-    """Node abscissae of the section: supports, droppers, stitch ends, and no element longer than the mesh size."""
+def _grid(cat: CatenaryDefinition, n_spans: int, extra_keys: tuple = ()) -> np.ndarray:
+    """Node abscissae of the section: supports, droppers, stitch ends, `extra_keys` (within a span), and
+    no element longer than the mesh size."""
     L = cat.span_m
-    keys = [0.0, *cat.dropper_positions_m]
+    keys = [0.0, *cat.dropper_positions_m, *extra_keys]
     if cat.stitch is not None:
         keys += [cat.stitch_length_m / 2, L - cat.stitch_length_m / 2]
     keys = np.unique(np.round(keys, 9))
@@ -78,10 +79,13 @@ class Section:
         return i
 
 
-def build_section(cat: CatenaryDefinition, n_spans: int) -> Section:
-    """Mesh and wire matrices of n equal spans (anchored ends), with droppers and supports located."""
+def build_section(cat: CatenaryDefinition, n_spans: int, extra_keys: tuple = (),
+                  window_m: tuple[float, float] | None = None) -> Section:
+    """Mesh and wire matrices of n equal spans (anchored ends), with droppers and supports located.
+    With `window_m` = (a, b) only the wire elements within [a, b] are assembled (a periodic block
+    that does not begin at a support); `extra_keys` adds nodes at those abscissae of every span."""
     L = cat.span_m
-    x = _grid(cat, n_spans)
+    x = _grid(cat, n_spans, extra_keys)
     n = len(x)
     cw = np.arange(n) * 2
     mw = 2 * n + np.arange(n) * 2
@@ -103,6 +107,8 @@ def build_section(cat: CatenaryDefinition, n_spans: int) -> Section:
 
     def add_chain(xs, wdofs, wire):
         for a in range(len(xs) - 1):
+            if window_m is not None and not (window_m[0] - 1e-9 <= xs[a] and xs[a + 1] <= window_m[1] + 1e-9):
+                continue
             ke, me, q = beam_matrices(xs[a + 1] - xs[a], wire)
             d = [wdofs[a], wdofs[a] + 1, wdofs[a + 1], wdofs[a + 1] + 1]
             for r in range(4):

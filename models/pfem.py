@@ -243,3 +243,31 @@ class FixedInterfaceModel:
         Xx = self.dynamic_constraint(c, d, px, fx) @ P  # n_w x n_x x n_R
         Xy = np.conj(np.transpose(P, (0, 2, 1))) @ np.transpose(self.dynamic_constraint(c, d, py, fy), (0, 2, 1))
         return modal + Xx @ np.linalg.solve(S, Xy)
+
+    def point_response(self, omega: float, Sx, Sy, blocks: np.ndarray, n_phases: int = 2048) -> np.ndarray:
+        """Response (blocks x points x sources) of the infinite periodic structure to a unit harmonic force
+        at frequency `omega` applied in block 0 only (a fixed load, not a moving one), by Floquet-Bloch
+        synthesis: u_j = (1/2 pi) int H(theta; x, y) exp(-i j theta) d theta over the propagation phase
+        theta per block (the w T of Paper C eq. 13), midpoint rule with `n_phases` points. The modal part of
+        H does not depend on theta, so it appears in block 0 only."""
+        w = np.array([float(omega)])
+        c, d, _, _ = self.coefficients(w)
+        px, fx = self.functionals(Sx)
+        py, fy = self.functionals(Sy)
+        modal = np.einsum("xp,p,yp->xy", fx, 1.0 / d[0], fy)
+        SB = ((1 + 1j * w[0] * self.beta) * self.K_BB + c[0] * self.M_BB + 1j * w[0] * self.C_BB
+              - c[0] ** 2 * np.einsum("pa,p,pb->ab", self.M_qB, 1.0 / d[0], self.M_qB))
+        Xx = self.dynamic_constraint(c, d, px, fx)[0]  # points x n_B
+        Xy = self.dynamic_constraint(c, d, py, fy)[0]
+        theta = (np.arange(n_phases) + 0.5) * 2 * np.pi / n_phases
+        nR = self.n_right
+        P = np.zeros((n_phases, 2 * nR, nR), dtype=complex)
+        P[:, :nR, :] = np.exp(1j * theta)[:, None, None] * np.eye(nR)
+        P[:, nR:, :] = np.eye(nR)
+        PH = np.conj(np.transpose(P, (0, 2, 1)))
+        boundary = (Xx @ P) @ np.linalg.solve(PH @ SB @ P, PH @ Xy.T)  # phases x points x sources
+        phase = np.exp(-1j * np.outer(np.asarray(blocks), theta)) / n_phases  # blocks x phases
+        out = np.einsum("jt,txy->jxy", phase, boundary)
+        out[np.asarray(blocks) == 0] += modal
+        return out
+

@@ -48,6 +48,7 @@ class ContactBlock:
     dropper_tension_N: np.ndarray = None  # static tension f_d0
     dropper_stiffness_N_m: np.ndarray = None  # axial stiffness k_d
     z0: object = None  # x -> static contact-wire height
+    origin_m: float = 0.0  # abscissa along the span of the block's left end (0: a support)
 
     @property
     def n_droppers(self) -> int:
@@ -106,8 +107,8 @@ def catenary_block(cat: CatenaryDefinition) -> ContactBlock:
     the steady arm and the messenger support (when elastic) on the left support only, so that each
     support counts once along the line."""
     if cat.stitch is not None:
-        raise CatenaryError("catenary: a PFEM block of a stitched catenary is not supported yet (its stitch wire "
-                            "crosses the block boundary)")
+        raise CatenaryError("catenary: a stitched catenary's block does not begin at a support "
+                            "(use shifted_catenary_block)")
     ff = form_find(cat, 3)
     nd = len(cat.dropper_positions_m)
     lengths = ff.dropper_lengths_m[nd:2 * nd]
@@ -158,3 +159,99 @@ def catenary_block(cat: CatenaryDefinition) -> ContactBlock:
     return ContactBlock(blk, lambda x: hermite_shapes(nodes, x, len(idx), w_dof),
                         np.array(cat.dropper_positions_m, dtype=float), new[np.array(g)], new[np.array(up)],
                         tensions, kd, z0=lambda x: contact_wire_profile(ff, 1, x))
+
+
+def block_origin_m(cat: CatenaryDefinition, samples_per_span: int) -> float:
+    """Where the periodic block of a catenary begins along the span: at the support (0) when nothing
+    crosses it but the wires; for a stitched catenary, whose stitch wire spans the support, at the
+    contact sample nearest the middle of the dropper interval nearest mid-span, so that the block holds
+    the whole stitch with its droppers and its ends lie far from every dropper. A whole number of
+    samples, so that shifting the contact point's time origin back is exact."""
+    if cat.stitch is None:
+        return 0.0
+    L = cat.span_m
+    xd = np.array(cat.dropper_positions_m, dtype=float)
+    mids = 0.5 * (xd[1:] + xd[:-1])
+    mid = mids[int(np.argmin(np.abs(mids - L / 2)))]
+    step = L / samples_per_span
+    return float(round(mid / step) * step)
+
+
+def shifted_catenary_block(cat: CatenaryDefinition, origin_m: float) -> ContactBlock:
+    """One span of a catenary file as a periodic block from `origin_m` to `origin_m` + L (Paper C sec. 2
+    with the block's ends inside a span): the block holds one support, with its steady arm, messenger
+    support and stitch wire (and the stitch droppers) whole, so that any catenary the FE builder
+    accepts is periodic in it. Linearised about the form-found state of the central span of three.
+    Abscissae (contact shapes, droppers, z0) are block coordinates x' = x - origin_m."""
+    L = cat.span_m
+    if not 0.0 < origin_m < L:
+        raise CatenaryError(f"catenary: a shifted block must begin inside the span (got {origin_m:g} m)")
+    a, b = origin_m, origin_m + L
+    if cat.stitch is not None and not (a < L - cat.stitch_length_m / 2 and L + cat.stitch_length_m / 2 < b):
+        raise CatenaryError("stitch_wire.length_m: the stitch wire must lie within the block from "
+                            f"{a:g} m to {b:g} m")
+    ff = form_find(cat, 3)
+    nd = len(cat.dropper_positions_m)
+    lengths = ff.dropper_lengths_m[nd:2 * nd]
+    tensions = ff.dropper_tensions_N[nd:2 * nd]
+    sec = build_section(cat, 2, extra_keys=(origin_m,), window_m=(a, b))
+    nodes = np.flatnonzero((sec.x >= a - 1e-9) & (sec.x <= b + 1e-9))
+    inner_stitch = [w for seg in sec.stitch_w for w in seg[1:-1]]
+    dofs = np.concatenate([sec.cw_w[nodes], sec.cw_w[nodes] + 1, sec.mw_w[nodes], sec.mw_w[nodes] + 1,
+                           np.array(inner_stitch, dtype=int), np.array(inner_stitch, dtype=int) + 1])
+    in_block = [(k, d) for k, d in enumerate(sec.droppers) if a - 1e-9 <= d[0] < b - 1e-9]
+    order = np.argsort([d[0] for _, d in in_block])
+    in_block = [in_block[i] for i in order]
+    span_index = np.array([k % nd for k, _ in in_block])
+    g = np.array([d[1] for _, d in in_block])
+    up = np.array([d[2] for _, d in in_block])
+    kd = cat.dropper_axial_stiffness_N / lengths[span_index]
+    n_all = sec.ndof
+    r, c, v = [], [], []
+    for lo, hi, k in zip(g, up, kd, strict=True):
+        r += [lo, lo, hi, hi]
+        c += [lo, hi, lo, hi]
+        v += [k, -k, -k, k]
+    support = sec.node(L)
+    cw_s, mw_s = sec.cw_w[support], sec.mw_w[support]
+    r.append(cw_s)
+    c.append(cw_s)
+    v.append(cat.steady_arm_stiffness_N_m)
+    elastic = cat.messenger_support_stiffness_N_m > 0
+    if elastic:
+        r.append(mw_s)
+        c.append(mw_s)
+        v.append(cat.messenger_support_stiffness_N_m)
+    else:
+        dofs = dofs[dofs != mw_s]  # messenger held at the support
+    K = sec.K_wires + sparse.csr_matrix((v, (r, c)), shape=(n_all, n_all))
+    lump = np.zeros(n_all)
+    dm = cat.dropper_mass_kg_m * lengths[span_index] / 2
+    np.add.at(lump, g, dm + cat.clamp_mass_contact_kg)
+    np.add.at(lump, up, dm + cat.clamp_mass_messenger_kg)
+    lump[cw_s] += cat.steady_arm_mass_kg
+    M = sec.M_wires + sparse.diags(lump)
+    idx = np.sort(dofs)
+    new = -np.ones(n_all, dtype=int)
+    new[idx] = np.arange(len(idx))
+    K = K.tocsr()[idx][:, idx]
+    M = M.tocsr()[idx][:, idx]
+    C = cat.alpha_1_s * M + cat.beta_s * K
+    first, last = nodes[0], nodes[-1]
+    left = [sec.cw_w[first], sec.cw_w[first] + 1, sec.mw_w[first], sec.mw_w[first] + 1]
+    right = [sec.cw_w[last], sec.cw_w[last] + 1, sec.mw_w[last], sec.mw_w[last] + 1]
+    blk = PeriodicBlock(M, K, C, [new[i] for i in left], [new[i] for i in right], L, cat.alpha_1_s, cat.beta_s)
+    x_block = sec.x[nodes] - a
+    w_dof = new[sec.cw_w[nodes]]
+    from .fe_catenary import contact_wire_profile
+
+    return ContactBlock(blk, lambda x: hermite_shapes(x_block, x, len(idx), w_dof),
+                        np.array([d[0] for _, d in in_block]) - a, new[g], new[up], tensions[span_index], kd,
+                        z0=lambda x: contact_wire_profile(ff, 1, np.mod(np.asarray(x) + a, L)), origin_m=a)
+
+
+def periodic_block(cat: CatenaryDefinition, samples_per_span: int) -> ContactBlock:
+    """The PFEM block of a catenary file: from a support when nothing but the wires crosses it, else
+    shifted into the span (`block_origin_m`)."""
+    origin = block_origin_m(cat, samples_per_span)
+    return catenary_block(cat) if origin == 0.0 else shifted_catenary_block(cat, origin)

@@ -217,6 +217,30 @@ def build_operators(cb: ContactBlock, s: PfemSettings, progress=None, chunk: int
     info = {"build_s": time.perf_counter() - t_start, "n_frequencies": len(omega), "grid": s.grid,
             "omega_max": float(omega[-1]), "modes": r, "boundary_dofs": int(nB)}
     empty = np.zeros(0)
-    return PfemOperators(s, np.ascontiguousarray(cc.T), dc, cd, dd, np.asarray(z0, dtype=float), win,
-                         cb.dropper_tension_N if nd else empty, cb.dropper_stiffness_N_m if nd else empty,
-                         cb.dropper_x_m if nd else empty, info)
+    ops = PfemOperators(s, np.ascontiguousarray(cc.T), dc, cd, dd, np.asarray(z0, dtype=float), win,
+                        cb.dropper_tension_N if nd else empty, cb.dropper_stiffness_N_m if nd else empty,
+                        cb.dropper_x_m if nd else empty, info)
+    return to_span_origin(ops, cb.origin_m, cb.block.length_m) if cb.origin_m else ops
+
+
+def to_span_origin(ops: PfemOperators, origin_m: float, span_m: float) -> PfemOperators:
+    """The operators of a block that begins at `origin_m` along the span, re-indexed so that sample 0 is
+    the support: a contact sample b of the block is span sample b + s (mod N), s = origin / (V dt). The
+    periodic response is the same; only the time origin of the contact point moves, so every index
+    that counts samples (loads, observed heights, correction phases, window starts) shifts by s and the
+    droppers are put back in span order. Window-relative indices and harmonics are unchanged."""
+    st = ops.settings
+    shift = origin_m / (st.speed_m_s * st.dt_s)
+    s = int(round(shift))
+    if abs(shift - s) > 1e-6:
+        raise ValueError("the block's origin must lie on a contact sample")
+    x = np.mod(ops.dropper_x_m + origin_m, span_m)
+    order = np.argsort(x)
+    cc = np.roll(ops.cc, (s, s), axis=(0, 1))
+    dc = np.roll(ops.dc, s, axis=0)[:, order]
+    cd = np.roll(ops.cd, (s, s), axis=(0, 2))[:, order]
+    dd = ops.dd[order][:, :, order]
+    win = dropper_windows(x[order], st.speed_m_s, st.dt_s, ops.n)
+    return PfemOperators(st, np.ascontiguousarray(cc), np.ascontiguousarray(dc), np.ascontiguousarray(cd),
+                         np.ascontiguousarray(dd), np.roll(ops.z0, s), win, ops.dropper_tension_N[order],
+                         ops.dropper_stiffness_N_m[order], x[order], {**ops.info, "block_origin_m": origin_m})

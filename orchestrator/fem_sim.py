@@ -52,8 +52,6 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
         raise CaseError("catenary.definition_file: the case's catenary has no catenary file to build a section from")
     path = (case.source.parent / case.values["catenary"]["definition_file"]).resolve()
     cat = load_definition(path)
-    if cat.stitch is not None:
-        raise CaseError("catenary.definition_file: fem-sim does not model stitch wires yet")
     if case.pantograph.model != "chain":
         raise CaseError("pantograph.model: fem-sim needs a pantograph in contact (\"chain\"), not a rigid mass")
     slacken = case.values["pfem"]["droppers"]
