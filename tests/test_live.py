@@ -134,3 +134,20 @@ def test_rig_run_with_a_stalled_viewer_ends_normally_and_logs_the_rig_layout_top
     assert advertised == set(schemas) and {"/adapter", "/master"} <= advertised
     layout = json.loads((ROOT / "docs" / "foxglove" / "pantohil-rig-layout.json").read_text())
     assert layout_topics(layout) <= set(schemas), layout_topics(layout) - set(schemas)
+
+
+def test_bad_live_endpoint_is_one_line_exit_2_and_no_run_folder(tmp_path):
+    import socket
+
+    from conftest import pantohil
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        in_use = f"127.0.0.1:{busy.getsockname()[1]}"
+        for args in (["--live", "127.0.0.1:http"], ["--live", "127.0.0.1:70000"], ["--live-wait"],
+                     ["--live", in_use], ["--live", "no-such-host.invalid:0"]):
+            out = tmp_path / "run"
+            proc = pantohil("run", "--out", str(out), "--quiet", *args)
+            assert proc.returncode == 2 and proc.stderr.count("\n") == 1, (args, proc.stderr)
+            assert "--live" in proc.stderr and not out.exists(), (args, proc.stderr)
