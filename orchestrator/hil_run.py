@@ -234,6 +234,8 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
         per_step = master.per_step_us()
         master.close()
     extra = {"topology": topology.name}
+    if publisher is not None:
+        extra["live"] = publisher.summary()
     if operators is not None:
         extra["operators"] = operators
     if pacer is not None:

@@ -132,6 +132,10 @@ class LivePublisher:
         self._channels[topic].log(data, log_time=int(round(t_s * 1e9)))
         self.published += 1
 
+    def summary(self) -> dict:
+        return {"url": self.url, "every_steps": self.decimation, "rate_hz": 1.0 / (self.decimation * self.dt_s),
+                "published_messages": self.published, "viewer_subscribed": self._viewers.subscribed.is_set()}
+
     def close(self) -> None:
         """Publish what is left, then stop the server (clients see the connection close)."""
         if self._stop.is_set():

@@ -75,6 +75,9 @@ def test_live_client_receives_the_logged_values(tmp_path):
     for topic, messages in received.items():
         for log_time_ns, payload in messages:  # every live message is the logged one of the same step
             assert logged[topic][log_time_ns] == payload, topic
+    live = json.loads((out / "summary.json").read_text())["live"]
+    assert live["url"] == url and live["every_steps"] == 10 and live["viewer_subscribed"]
+    assert live["published_messages"] >= sum(len(m) for m in received.values())
     steps = sorted(t for t, _ in received["/catenary"])
     dt_ns = 1_000_000
     assert all(t % (10 * dt_ns) == 0 for t in steps)  # 100 Hz of simulated time at dt = 1 ms
