@@ -219,9 +219,14 @@ def _rewrite_zip(path: Path, replace: dict[str, bytes]) -> None:
     path.write_bytes(buf.getvalue())
 
 
+SIMULATE_FMU_MAX_STEPS = 1000  # fmpy's simulate_fmu doubles its step until the run has at most this many
+
+
 def default_experiment(case: Case) -> tuple[float, float]:
-    """(step, stop time) of an FMU alone: the case's step, and the longest run the case allows."""
-    return case.dt_s, case.values["run"]["max_spans"] * case.samples_per_span * case.dt_s
+    """(step, stop time) of an FMU run alone: the case's step, for one span but at most 1000 steps, so that
+    a tool that caps the number of steps (fmpy's simulate_fmu) still takes the FMU's fixed step. A HIL
+    run's length is the master's (run.max_spans)."""
+    return case.dt_s, min(case.samples_per_span, SIMULATE_FMU_MAX_STEPS) * case.dt_s
 
 
 def _add_loader(fmu: Path, xml: bytes, runtime: loader.PythonRuntime, tmp: Path) -> dict[str, bytes]:

@@ -1,0 +1,156 @@
+"""The FMUs in hosts other than pantohil's master: a C host with no Python of its own (tests/hosts/
+jacobi_host.c, compiled here with cc) steps the virtual HIL as a Jacobi system and must reproduce the
+fmpy master's converged span; wrong communication steps are refused in fmpy and in the C host; fmpy's
+simulate_fmu takes step and stop time from the model descriptions."""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import fmpy
+import numpy as np
+import pytest
+from fmpy import read_model_description
+
+from conftest import load_run, pantohil
+from pantohil.builder.system import CONNECTIONS, FMU_NAMES
+
+HOST_SOURCE = Path(__file__).parent / "hosts" / "jacobi_host.c"
+CASES = Path(__file__).resolve().parents[1] / "models" / "cases"
+# what a host that never heard of Python has in its environment: none of Python's own variables
+PYTHON_VARIABLES = ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH", "PANTOHIL_LIBPYTHON", "VIRTUAL_ENV")
+
+
+@pytest.fixture(scope="module")
+def host(tmp_path_factory) -> Path:
+    cc = shutil.which(os.environ.get("CC", "cc"))
+    if cc is None:
+        pytest.skip("no C compiler")
+    exe = tmp_path_factory.mktemp("host") / "jacobi_host"
+    subprocess.run([cc, "-O2", "-std=c99", "-Wall", f"-I{Path(fmpy.__file__).parent / 'c-code'}",
+                    "-o", str(exe), str(HOST_SOURCE), "-ldl"], check=True)
+    return exe
+
+
+def _plan(fmus: dict[str, Path], into: Path, steps: int, last: int, wrong_step: tuple[str, float] | None = None) -> Path:
+    lines, index = [], {}
+    for i, name in enumerate(FMU_NAMES):
+        folder = into / name
+        with zipfile.ZipFile(fmus[name]) as z:
+            z.extractall(folder)
+        md = read_model_description(str(fmus[name]))
+        index[name] = (i, {v.name: v.valueReference for v in md.modelVariables})
+        lines.append(f"fmu {folder} {md.coSimulation.modelIdentifier} {md.guid}")
+    for src, out, dst, inp in CONNECTIONS:
+        lines.append(f"connect {index[src][0]} {index[src][1][out]} {index[dst][0]} {index[dst][1][inp]}")
+    dt = read_model_description(str(fmus["catenary"])).defaultExperiment.stepSize
+    lines += [f"record 0 {index['catenary'][1]['force_at_sample']}", f"steps {steps}", f"step {dt}", f"last {last}"]
+    if wrong_step is not None:
+        lines.append(f"wrong_step {index[wrong_step[0]][0]} {wrong_step[1]!r}")
+    plan = into / "plan.txt"
+    plan.write_text("\n".join(lines) + "\n")
+    return plan
+
+
+def _run_host(host: Path, plan: Path) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k not in PYTHON_VARIABLES}
+    proc = subprocess.run([str(host), str(plan)], env=env, capture_output=True, text=True, timeout=3600)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr
+    assert "python-loaded-before: 0" in proc.stdout  # the process had no interpreter when it loaded the FMUs
+    return proc
+
+
+def _host_matches_fmpy(host: Path, run_folder: Path, tmp_path: Path) -> float:
+    summary, span = load_run(run_folder)
+    n = summary["samples_per_span"]
+    fmus = {name: run_folder / "fmus" / f"{name}.fmu" for name in FMU_NAMES}
+    proc = _run_host(host, _plan(fmus, tmp_path, summary["spans"] * n, n))
+    values = np.array([float(line.split()[1]) for line in proc.stdout.splitlines() if line.startswith("value:")])
+    assert len(values) == n
+    return float(np.max(np.abs(values - span[:, 3])))
+
+
+def test_c_host_without_python_reproduces_the_default_case(host, default_run, tmp_path):
+    # steady_span.csv holds 13 significant digits: 1e-10 N at 130 N, below the 1e-9 N asked for
+    assert _host_matches_fmpy(host, default_run, tmp_path) <= 1e-9
+
+
+@pytest.mark.slow
+def test_c_host_without_python_reproduces_the_pfem_case(host, tmp_path):
+    run = tmp_path / "pfem"
+    proc = pantohil("run", str(CASES / "pfem_benchmark_250.toml"), "--out", str(run), "--quiet", timeout=3600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert _host_matches_fmpy(host, run, tmp_path / "host") <= 1e-9
+
+
+def test_c_host_gets_an_error_and_a_message_for_a_wrong_step(host, default_run, tmp_path):
+    fmus = {name: default_run / "fmus" / f"{name}.fmu" for name in FMU_NAMES}
+    proc = _run_host(host, _plan(fmus, tmp_path, 0, 0, ("pantograph", 0.002)))
+    assert "wrong-step-status: 3" in proc.stdout  # fmi2Error
+    assert "communication step of 0.002 s" in proc.stdout and "fixed step of 0.001 s" in proc.stdout
+
+
+def test_c_host_names_a_missing_libpython(host, default_run, tmp_path):
+    fmus = {name: default_run / "fmus" / f"{name}.fmu" for name in FMU_NAMES}
+    plan = _plan(fmus, tmp_path, 1, 1)
+    env = {k: v for k, v in os.environ.items() if k not in PYTHON_VARIABLES}
+    env["PANTOHIL_LIBPYTHON"] = str(tmp_path / "no" / "libpython3.so")
+    proc = subprocess.run([str(host), str(plan)], env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode != 0
+    logged = [line for line in proc.stdout.splitlines() if line.startswith("log ")]
+    assert len(logged) == 1 and "needs libpython" in logged[0] and "PANTOHIL_LIBPYTHON" in logged[0]
+
+
+WRONG_STEP_IN_FMPY = """
+import os, sys
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+path = sys.argv[1]
+md = read_model_description(path)
+slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                  instanceName="x")
+slave.instantiate()
+slave.setupExperiment(startTime=0.0)
+slave.enterInitializationMode()
+slave.exitInitializationMode()
+status = slave._functions["fmi2DoStep"](slave.component, 0.0, 2 * float(md.defaultExperiment.stepSize), 1)
+print("status", status, flush=True)
+os._exit(0)  # no interpreter teardown with pythonfmu's library loaded
+"""
+
+
+def test_fmpy_gets_an_error_and_a_message_for_a_wrong_step(default_run):
+    for name in FMU_NAMES:
+        proc = subprocess.run([sys.executable, "-c", WRONG_STEP_IN_FMPY, str(default_run / "fmus" / f"{name}.fmu")],
+                              capture_output=True, text=True, timeout=600)
+        assert "status 3" in proc.stdout, proc.stdout + proc.stderr  # fmi2Error
+        assert "this FMU takes only its fixed step of 0.001 s" in proc.stdout
+
+
+SIMULATE_ALONE = """
+import os, sys
+from fmpy import simulate_fmu
+result = simulate_fmu(sys.argv[1])
+t = result["time"]
+print("steps", len(t) - 1, "first", float(t[1] - t[0]), "stop", float(t[-1]), flush=True)
+os._exit(0)
+"""
+
+
+def test_simulate_fmu_takes_step_and_stop_time_from_the_model_description(tmp_path):
+    out = tmp_path / "fmus"
+    proc = pantohil("build", "--out", str(out))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    for name in (*FMU_NAMES, "adapter"):  # the adapter alone: no rig answers, its counters run
+        md = read_model_description(str(out / f"{name}.fmu"))
+        assert float(md.defaultExperiment.stepSize) == 0.001 and float(md.defaultExperiment.stopTime) == pytest.approx(0.936)
+        assert md.coSimulation.canHandleVariableCommunicationStepSize is False
+        run = subprocess.run([sys.executable, "-c", SIMULATE_ALONE, str(out / f"{name}.fmu")], capture_output=True,
+                             text=True, timeout=600)
+        words = run.stdout.split()
+        assert words[:2] == ["steps", "936"], run.stdout + run.stderr
+        assert float(words[3]) == pytest.approx(0.001, rel=1e-9) and float(words[5]) == pytest.approx(0.936, rel=1e-9)
