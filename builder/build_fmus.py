@@ -22,7 +22,7 @@ import pythonfmu
 
 from pantohil.fmus import fmu_support
 from pantohil.models.case import Case
-from pantohil.models.profile import write_profile_csv
+from pantohil.models.catenary.profile import write_profile_csv
 
 from . import loader
 from .system import FMU_NAMES, loop_latency_steps
@@ -91,7 +91,7 @@ def default_delay_steps(case: Case) -> int:
 def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
     """Write the project files an FMU carries in resources/: the model package and the case data."""
     pkg = stage / "pantohil"
-    shutil.copytree(MODELS_DIR, pkg / "models", ignore=shutil.ignore_patterns("__pycache__", "*.toml", "cases"))
+    shutil.copytree(MODELS_DIR, pkg / "models", ignore=shutil.ignore_patterns("__pycache__", "*.toml"))
     (pkg / "fmus").mkdir()
     for f in SUPPORT_MODULES:
         shutil.copy2(FMUS_DIR / f, pkg / "fmus" / f)

@@ -14,16 +14,21 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from pantohil.models import catenary_def, fe_catenary, operator_file, pfem, pfem_blocks, pfem_operators
+from pantohil.models.catenary.fe import definition as catenary_definition
+from pantohil.models.catenary.fe import model as fe_model
+from pantohil.models.catenary.pfem import blocks as pfem_blocks
+from pantohil.models.catenary.pfem import frf as pfem_frf
+from pantohil.models.catenary.pfem import operator_file
+from pantohil.models.catenary.pfem import operators as pfem_operators
 from pantohil.models.case import Case
-from pantohil.models.catenary_def import load_definition
-from pantohil.models.operator_file import FORMAT_VERSION, load_operators, save_operators
-from pantohil.models.pfem_blocks import periodic_block
-from pantohil.models.pfem_operators import build_operators
+from pantohil.models.catenary.fe.definition import load_definition
+from pantohil.models.catenary.pfem.operator_file import FORMAT_VERSION, load_operators, save_operators
+from pantohil.models.catenary.pfem.blocks import periodic_block
+from pantohil.models.catenary.pfem.operators import build_operators
 
 from .build_fmus import cache_root
 
-SOURCES = (pfem, pfem_blocks, pfem_operators, fe_catenary, catenary_def, operator_file)
+SOURCES = (pfem_frf, pfem_blocks, pfem_operators, fe_model, catenary_definition, operator_file)
 
 
 @dataclass

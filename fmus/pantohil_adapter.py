@@ -17,7 +17,7 @@ from collections import OrderedDict
 
 from pantohil.fmus import udp_protocol as proto
 from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
-from pantohil.models.actuator import ActuatorLimits, Limiter
+from pantohil.models.rig.actuator import ActuatorLimits, Limiter
 
 LINK_OK, LINK_DEGRADED, LINK_FAULT = 0, 1, 2
 _WINDOW = 4096  # how many recent sequence numbers are remembered for late/duplicate detection

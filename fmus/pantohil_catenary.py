@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
-from pantohil.models.asm import AsmParameters
-from pantohil.models.hil import UPDATES, HilSettings, PeriodicHil
-from pantohil.models.operator_file import load_operators
-from pantohil.models.pfem_hil import PfemHil
-from pantohil.models.profile import read_profile_csv
-from pantohil.models.receptance import asm_operator, harmonic_count, reduce_harmonics
+from pantohil.models.catenary.asm.string import AsmParameters
+from pantohil.models.hil.loop import UPDATES, HilSettings, PeriodicHil
+from pantohil.models.catenary.pfem.operator_file import load_operators
+from pantohil.models.hil.droppers import PfemHil
+from pantohil.models.catenary.profile import read_profile_csv
+from pantohil.models.catenary.receptance import asm_operator, harmonic_count, reduce_harmonics
 
 PROFILE_FILE = "profile.csv"
 OPERATOR_FILE = "operators.npz"

@@ -3,7 +3,7 @@ or a rigid mass on the actuator (Paper A sec. 2, Paper B sec. 5.1)."""
 from __future__ import annotations
 
 from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
-from pantohil.models.pantograph import PantographParameters, make_pantograph
+from pantohil.models.pantograph.lumped import PantographParameters, make_pantograph
 
 VARIABLES = [
     Var("pantograph_model", "integer", "parameter", "1", "0: mass chain with penalty contact, 1: rigid mass on the actuator", 0, 0, 1),

@@ -3,7 +3,7 @@ filter, force offset and noise (Paper B sec. 4, Paper D secs. 2 and 5.1)."""
 from __future__ import annotations
 
 from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
-from pantohil.models.rig import Rig, RigParameters
+from pantohil.models.rig.chain import Rig, RigParameters
 
 VARIABLES = [
     Var("delay_steps", "integer", "parameter", "1", "Pure delay of the height path in steps", 0, 0),

@@ -13,14 +13,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .asm import AsmParameters, receptance_direct
-from .hil import UPDATES, HilSettings
-from .pantograph import PantographParameters
-from .profile import DropperProfile, ProfileError, TabulatedProfile, read_profile_csv
-from .receptance import harmonic_count
-from .rig import RigParameters
+from pantohil.models.catenary.asm.string import AsmParameters, receptance_direct
+from pantohil.models.hil.loop import UPDATES, HilSettings
+from pantohil.models.pantograph.lumped import PantographParameters
+from pantohil.models.catenary.profile import DropperProfile, ProfileError, TabulatedProfile, read_profile_csv
+from pantohil.models.catenary.receptance import harmonic_count
+from pantohil.models.data import CASES_DIR
+from pantohil.models.rig.chain import RigParameters
 
-CASES_DIR = Path(__file__).parent / "cases"
 DEFAULT_CASE = CASES_DIR / "asm_250.toml"
 
 
@@ -239,7 +239,7 @@ class Case:
 
     def pfem_settings(self):
         """The discretisation of this case's PFEM operators (Paper C sec. 3, Paper D sec. 3.5/3.7)."""
-        from .pfem_operators import PfemSettings
+        from pantohil.models.catenary.pfem.operators import PfemSettings
 
         p = self.values["pfem"]
         return PfemSettings(self.speed_m_s, self.dt_s, self.samples_per_span, self.n_harmonics,
@@ -303,8 +303,8 @@ def _check_pantograph(v: dict) -> PantographParameters:
 
 
 def _analysis(case_path: Path, name: str, key: str):
-    from .catenary_analysis import cached_analysis
-    from .catenary_def import CatenaryError
+    from pantohil.models.catenary.fe.analysis import cached_analysis
+    from pantohil.models.catenary.fe.definition import CatenaryError
 
     try:
         return cached_analysis(case_path.parent / name)

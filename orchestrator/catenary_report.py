@@ -14,9 +14,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from pantohil.models.catenary_analysis import CatenaryAnalysis, analyse  # noqa: E402
-from pantohil.models.catenary_def import load_definition  # noqa: E402
-from pantohil.models.fe_catenary import form_find  # noqa: E402
+from pantohil.models.catenary.fe.analysis import CatenaryAnalysis, analyse  # noqa: E402
+from pantohil.models.catenary.fe.definition import load_definition  # noqa: E402
+from pantohil.models.catenary.fe.model import form_find  # noqa: E402
 
 from .report import save_figure  # noqa: E402
 
@@ -71,7 +71,7 @@ def _stiffness_plot(path: Path, a: CatenaryAnalysis) -> None:
     ok = np.array(a.propagating)
     ax2.plot(f[ok], lam[ok], "o", ms=4, label="FE, propagating")
     ax2.plot(f[~ok], lam[~ok], "x", ms=5, color="0.5", label="FE, stop band (not fitted)")
-    from pantohil.models.asm import AsmParameters, wavelength_at_rest
+    from pantohil.models.catenary.asm.string import AsmParameters, wavelength_at_rest
 
     fine = np.linspace(f.min(), f.max(), 200)
     p = AsmParameters(a.contact_tension_N, a.fitted_density_kg_m, a.support_stiffness_N_m2, a.alpha_1_s, a.beta_s)

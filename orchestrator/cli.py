@@ -14,7 +14,7 @@ from datetime import datetime
 from pathlib import Path
 
 from pantohil.models.case import CaseError, load_case
-from pantohil.models.operator_file import OperatorFileError
+from pantohil.models.catenary.pfem.operator_file import OperatorFileError
 
 EXIT_BAD_INPUT = 2
 
@@ -71,7 +71,7 @@ def _parser() -> argparse.ArgumentParser:
                      help="SCHED_FIFO priority if permitted (0: normal scheduling; default 49)")
 
     catenary = sub.add_parser("catenary", help="form-finding, stiffness and ASM fit of a catenary file (FE model)")
-    catenary.add_argument("file", type=Path, help="catenary definition (TOML), e.g. models/catenaries/paper_a_stitched.toml")
+    catenary.add_argument("file", type=Path, help="catenary definition (TOML), e.g. models/data/catenaries/paper_a_stitched.toml")
     catenary.add_argument("--out", type=Path, required=True, help="folder for catenary.json, CSV files and plots")
 
     build = sub.add_parser("build", help="build and validate the four FMUs of a case (catenary, rig, pantograph, "
@@ -118,7 +118,7 @@ def _parser() -> argparse.ArgumentParser:
 
     sweep = sub.add_parser("sweep", help="a grid over case keys as independent runs on Dask (resumable; CSV, "
                                          "Parquet and plots)")
-    sweep.add_argument("file", type=Path, help="sweep file (TOML), e.g. models/sweeps/speed_200_300.toml")
+    sweep.add_argument("file", type=Path, help="sweep file (TOML), e.g. models/data/sweeps/speed_200_300.toml")
     sweep.add_argument("--out", type=Path, required=True, help="sweep folder (a restart into it skips done points)")
     sweep.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://10.0.0.1:8786 "
                                                               "(default: a LocalCluster)")
@@ -276,7 +276,7 @@ def _cmd_build(args) -> int:
 
 
 def _cmd_catenary(args) -> int:
-    from pantohil.models.catenary_def import CatenaryError
+    from pantohil.models.catenary.fe.definition import CatenaryError
     from pantohil.orchestrator.catenary_report import catenary_report
 
     try:
@@ -389,7 +389,7 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_example(args) -> int:
-    from pantohil.models.pfem_example import paper_c_appendix
+    from pantohil.models.catenary.pfem.paper_c_appendix import paper_c_appendix
     from pantohil.orchestrator.report import plot_force_history, write_json_atomic
 
     res = paper_c_appendix()

@@ -10,7 +10,7 @@ import numpy as np
 from scipy import signal
 
 from pantohil.models.case import Case, CaseError
-from pantohil.models.catenary_def import load_definition
+from pantohil.models.catenary.fe.definition import load_definition
 
 from . import report
 from .recorder import McapRecorder
@@ -45,7 +45,7 @@ def force_statistics(f: np.ndarray) -> dict:
 def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progress: bool = True) -> dict:
     from tqdm import tqdm
 
-    from pantohil.models.fe_simulation import simulate_section
+    from pantohil.models.catenary.fe.simulation import simulate_section
 
     spans = central_spans(n_spans, central)
     if not case.values["catenary"]["definition_file"]:

@@ -20,8 +20,8 @@ from pantohil.builder.build_fmus import build_case_fmus
 from pantohil.builder.system import (CONNECTIONS, FMU_NAMES, HARDWARE_CONNECTIONS, HARDWARE_FMU_NAMES,
                                      loop_latency_steps)
 from pantohil.models.case import Case, CaseError
-from pantohil.models.closed_form import one_sided_harmonics, single_pantograph
-from pantohil.models.hil import ConvergenceMonitor
+from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, single_pantograph
+from pantohil.models.hil.loop import ConvergenceMonitor
 from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
 
 from . import report
@@ -307,7 +307,7 @@ def _start_live(endpoint: tuple[str, int], master, groups: dict, topology: Topol
 
 
 def case_dropper_positions(case: Case) -> list:
-    from pantohil.models.catenary_def import load_definition
+    from pantohil.models.catenary.fe.definition import load_definition
 
     return [float(x) for x in load_definition(case.definition_path).dropper_positions_m]
 

@@ -183,7 +183,7 @@ def _is_geometric(values: np.ndarray) -> bool:
 def plot_stability_maps(out: Path, rows: list[dict], pantograph, update: str, case_name: str) -> list[str]:
     """Paper D Figs. 5-7: spectral radius (unstable region blank) and the relaxation chosen, with the
     pantograph's contact natural frequency in red. Axes: contact stiffness (or delay) against f_max."""
-    from pantohil.models.stability_map import contact_frequency_hz
+    from pantohil.models.stability.map_point import contact_frequency_hz
 
     if not rows:
         return []

@@ -21,8 +21,8 @@ from pathlib import Path
 
 from pantohil.fmus import udp_protocol as proto
 from pantohil.models.case import Case
-from pantohil.models.pantograph import make_pantograph
-from pantohil.models.rig import Rig
+from pantohil.models.pantograph.lumped import make_pantograph
+from pantohil.models.rig.chain import Rig
 
 RCVBUF_BYTES = 4 << 20
 

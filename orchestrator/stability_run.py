@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.case import Case, CaseError, load_case
-from pantohil.models.receptance import asm_operator, harmonic_count, reduce_harmonics
-from pantohil.models.stability_map import (best_relaxation, contact_frequency_hz, problem_for,
+from pantohil.models.catenary.receptance import asm_operator, harmonic_count, reduce_harmonics
+from pantohil.models.stability.map_point import (best_relaxation, contact_frequency_hz, problem_for,
                                            with_contact_stiffness)
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
@@ -66,7 +66,7 @@ def _operator(case: Case, f_max: float):
     if case.model == "asm":
         return asm_operator(case.catenary, case.speed_m_s, n, dt, nh).kernel, None
     from pantohil.builder.operators import case_operators
-    from pantohil.models.operator_file import load_operators
+    from pantohil.models.catenary.pfem.operator_file import load_operators
 
     if nh > case.n_harmonics:
         raise CaseError(f"--fmax: {f_max:g} Hz needs {nh} harmonics; this PFEM case's operators keep "

@@ -11,6 +11,9 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+REFERENCE_DIR = Path(__file__).resolve().parent / "reference"
+CASES_DIR = ROOT / "models" / "data" / "cases"
+CATENARIES_DIR = ROOT / "models" / "data" / "catenaries"
 
 
 def pantohil(*args: str, cwd: Path | None = None, timeout: float = 600) -> subprocess.CompletedProcess:

@@ -23,7 +23,7 @@ def main() -> None:
             with tempfile.TemporaryDirectory() as tmp:
                 t0 = time.perf_counter()
                 proc = subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", "catenary",
-                                       str(ROOT / "models" / "catenaries" / f"{name}.toml"), "--out", tmp],
+                                       str(ROOT / "models" / "data" / "catenaries" / f"{name}.toml"), "--out", tmp],
                                       capture_output=True, text=True)
                 times.append(time.perf_counter() - t0)
                 assert proc.returncode == 0, proc.stderr

@@ -18,10 +18,10 @@ def main() -> None:
     ap.add_argument("--spans", type=int, default=30)
     args = ap.parse_args()
     from pantohil.models.case import load_case
-    from pantohil.models.catenary_def import load_definition
-    from pantohil.models.fe_simulation import simulate_section
+    from pantohil.models.catenary.fe.definition import load_definition
+    from pantohil.models.catenary.fe.simulation import simulate_section
 
-    case = load_case(ROOT / "models" / "cases" / "pfem_benchmark_250.toml")
+    case = load_case(ROOT / "models" / "data" / "cases" / "pfem_benchmark_250.toml")
     cat = load_definition(case.definition_path)
     walls, mem = [], []
     for _ in range(args.repeats):

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
-CASE = ROOT / "models" / "cases" / "pfem_benchmark_250.toml"
+CASE = ROOT / "models" / "data" / "cases" / "pfem_benchmark_250.toml"
 
 
 def main() -> None:
@@ -31,7 +31,7 @@ def main() -> None:
         os.environ["PANTOHIL_CACHE"] = str(Path(tmp) / "cache")
         from pantohil.builder import operators as ob
         from pantohil.models.case import load_case
-        from pantohil.models.operator_file import load_operators
+        from pantohil.models.catenary.pfem.operator_file import load_operators
 
         case = load_case(CASE)
         builds = []

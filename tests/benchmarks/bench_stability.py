@@ -17,11 +17,11 @@ from pathlib import Path
 
 def per_radius_costs() -> None:
     from pantohil.models.case import load_case
-    from pantohil.models.hil import HilSettings
-    from pantohil.models.linear_pantograph import linear_pantograph
-    from pantohil.models.receptance import asm_operator
-    from pantohil.models.stability import circulant_dense, circulant_range_basis, reduced_span_map, span_map, step_matrix
-    from pantohil.models.step_roots import step_loop, step_spectral_radius
+    from pantohil.models.hil.loop import HilSettings
+    from pantohil.models.pantograph.linear import linear_pantograph
+    from pantohil.models.catenary.receptance import asm_operator
+    from pantohil.models.stability.maps import circulant_dense, circulant_range_basis, reduced_span_map, span_map, step_matrix
+    from pantohil.models.stability.step_roots import step_loop, step_spectral_radius
 
     c = load_case(None, [])
     op = asm_operator(c.catenary, c.speed_m_s, c.samples_per_span, c.dt_s, c.n_harmonics)

@@ -1,0 +1,1 @@
+"""Catenary models: ASM strings, receptances, finite elements and PFEM operators."""

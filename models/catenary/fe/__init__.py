@@ -1,0 +1,1 @@
+"""Finite-element catenary: definition files, form-finding, analysis, ASM fit and time integration."""

@@ -1,0 +1,1 @@
+"""Periodic finite-element method (PFEM): FRFs, blocks, operators and their file (Papers C-D)."""

@@ -1,0 +1,1 @@
+"""The periodic HIL iteration on the virtual catenary (Paper B, Paper D)."""

@@ -1,0 +1,144 @@
+"""The HIL iteration on PFEM operators with dropper slackening (Paper C sec. 5.3, eqs. 34-40; Paper D
+sec. 3.2-3.7): the contact height z and the dropper elongations are updated at every step with the
+relaxed force increment; then every dropper's correction force at its current instant is solved
+from eq. (40) for the droppers that slacken; the height command is taken D samples ahead, from z
+(step-by-step) or from the blend of the last two block snapshots (span-by-span, Paper D eq. 3).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pantohil.models.hil.loop import UPDATES, HilSettings
+from pantohil.models.catenary.pfem.operators import PfemOperators
+from pantohil.models.catenary.receptance import reduce_harmonics
+
+
+class PfemHil:
+    # fixed after construction (not part of an FMU state)
+    CONSTANT_ATTRIBUTES = ("ops", "s", "z0", "_dc", "_dd", "_basis", "f0", "kd", "win", "_d", "_window_index",
+                           "_basis_at", "_dd_at", "_slack_below")
+
+    def __init__(self, ops: PfemOperators, settings: HilSettings, dropper_relaxation: float = 1.0,
+                 droppers: bool = True):
+        if settings.update not in UPDATES:
+            raise ValueError(f"hil.update must be one of {UPDATES}, got {settings.update!r}")
+        self.ops, self.s = ops, settings
+        self.n = n = ops.n
+        self.nd = ops.n_droppers if droppers else 0
+        self.mu_d = dropper_relaxation
+        self.z0 = reduce_harmonics(ops.z0, ops.settings.n_harmonics)
+        self.z = self.z0.copy()
+        self._z_older = self.z0.copy()
+        self._z_block = self.z0.copy()
+        self.k = 0
+        self.force_relaxed = np.zeros(n)
+        self.last_force = np.zeros(n)
+        jd = ops.settings.n_harmonics_dropper
+        # elongations as the real and imaginary parts of their harmonics over the window index, so that
+        # one step is a few small real products
+        self.elongation = np.zeros((ops.n_droppers, 2 * jd))
+        self._dc = np.concatenate([ops.dc.real, ops.dc.imag], axis=-1)
+        self._dd = np.concatenate([ops.dd.real, ops.dd.imag], axis=-1)
+        a = np.full(jd, 2.0)
+        a[0] = 1.0
+        if n % 2 == 0 and jd == n // 2 + 1:
+            a[-1] = 1.0
+        theta = 2 * np.pi * np.outer(np.arange(n), np.arange(jd)) / n
+        self._basis = np.concatenate([a * np.cos(theta), -a * np.sin(theta)], axis=1) / n  # irfft row i
+        self.f0 = ops.dropper_tension_N
+        self.kd = ops.dropper_stiffness_N_m
+        self.win = ops.window_start
+        self._d = np.arange(ops.n_droppers)
+        # everything a step needs, by the phase n_bar of the step (each dropper has one instant per phase)
+        self._window_index = (np.arange(n)[:, None] - self.win[None, :]) % n  # [n_bar, d]
+        self._basis_at = self._basis[self._window_index]  # [n_bar, d, j]
+        self._dd_at = self._dd[self._d[None, :], self._window_index] if ops.n_droppers else self._dd  # [n_bar, d, e, j]
+        self.correction_at = np.zeros((n, ops.n_droppers))  # f_d in use, by the phase of its instant
+        self._slack_below = -self.f0 / self.kd if ops.n_droppers else self.f0
+        self.current_correction = np.zeros(ops.n_droppers)  # at this step's instant, per dropper
+
+    @property
+    def sample(self) -> int:
+        return self.k % self.n
+
+    @property
+    def span(self) -> int:
+        return self.k // self.n
+
+    def current_height(self, label: int) -> float:
+        return float(self.z[label])
+
+    def step(self, force: float) -> float:
+        n_bar = self.k % self.n
+        if not math.isnan(force):
+            self.last_force[n_bar] = force
+            delta = self.s.relaxation * (force - self.force_relaxed[n_bar])  # Paper D eq. (10)
+            if delta != 0.0:
+                self.force_relaxed[n_bar] += delta
+                self.z += delta * self.ops.cc[n_bar]  # Paper C eq. (34)
+                if self.nd:
+                    self.elongation += delta * self._dc[n_bar]  # eq. (35)
+        if self.nd:
+            self._correct(n_bar)
+        if self.s.update == "step":
+            command = self.z[(n_bar + self.s.delay_steps) % self.n]
+        else:
+            target = (n_bar + self.s.delay_steps) % self.n
+            w_new = (n_bar + 1) / self.n
+            command = (1.0 - w_new) * self._z_older[target] + w_new * self._z_block[target]
+            if n_bar == self.n - 1:
+                self._z_older, self._z_block = self._z_block, self.z.copy()
+        self.k += 1
+        if self.s.ramp_steps > 0 and self.k < self.s.ramp_steps:
+            command *= self.k / self.s.ramp_steps
+        return float(command)
+
+    @property
+    def correction(self) -> np.ndarray:
+        """Correction forces in use by dropper and window index."""
+        out = np.zeros((self.ops.n_droppers, self.n))
+        out[self._d[None, :], self._window_index] = self.correction_at
+        return out
+
+    def _correct(self, n_bar: int) -> None:
+        """Eqs. (38)-(40) at each dropper's instant of phase n_bar, then eqs. (36)-(37)."""
+        B = self._basis_at[n_bar]  # [d, j]
+        dl = np.einsum("dj,dj->d", B, self.elongation)
+        old = self.correction_at[n_bar]
+        self.current_correction = old  # a view: updated in place below
+        slack = dl < self._slack_below  # eq. (38): k_d dL < -f_d0
+        active = np.flatnonzero(slack | (old != 0.0))
+        if len(active) == 1:  # the common case, without the small linear algebra
+            a = active[0]
+            col = self._dd_at[n_bar, a]  # [observed e, j]
+            new = 0.0
+            if slack[a]:
+                daa = col[a] @ B[a]
+                new = (-self.f0[a] - self.kd[a] * (dl[a] - daa * old[a])) / (1.0 + self.kd[a] * daa)
+            change = self.mu_d * (new - old[a])
+            old[a] += change
+            self.z += change * self.ops.cd[n_bar, a]
+            self.elongation += change * col
+            return
+        if not len(active):
+            return
+        cols = self._dd_at[n_bar, active]  # [active loaded d, observed e, j]
+        old_a = old[active]
+        new = np.zeros(len(active))
+        s = np.flatnonzero(slack[active])
+        if len(s):
+            rows = active[s]
+            # D[r, a]: elongation of slack dropper r per unit correction of active dropper a
+            D = np.einsum("aej,ej->ea", cols[:, rows], B[rows])
+            ks = self.kd[rows]
+            rhs = -self.f0[rows] - ks * (dl[rows] - D @ old_a)
+            if len(s) == 1:
+                new[s] = rhs / (1.0 + ks[0] * D[0, s[0]])
+            else:
+                new[s] = np.linalg.solve(np.eye(len(s)) + ks[:, None] * D[:, s], rhs)  # eq. (40)
+        change = self.mu_d * (new - old_a)
+        old[active] += change  # a view: correction_at[n_bar]
+        self.z += change @ self.ops.cd[n_bar, active]  # eq. (36)
+        self.elongation += (change @ cols.reshape(len(active), -1)).reshape(self.elongation.shape)  # eq. (37)

@@ -1,0 +1,1 @@
+"""Lumped-mass pantograph models and their linear one-step maps."""

@@ -1,0 +1,98 @@
+"""Spectral radius of the virtual HIL iteration at a point of a map, and the relaxation that minimises it
+(Paper D sec. 4, Figs. 5-7: f_max, contact stiffness k_c and delay D; the best mu_c at every point).
+
+The fastest exact construction is picked per point (models/stability/maps.py, models/stability/step_roots.py):
+span-by-span on the range of I_cc; step-by-step with a circulant (ASM) operator by the roots of its
+characteristic function, falling back to the dense one-step matrix when those fail their check; a
+non-circulant (PFEM) operator in step-by-step by the dense span map.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from pantohil.models.hil.loop import HilSettings
+from pantohil.models.pantograph.linear import LinearPantograph, linear_pantograph
+from pantohil.models.pantograph.lumped import PantographParameters
+from pantohil.models.stability.maps import circulant_dense, circulant_range_basis, range_basis, reduced_span_map, span_map, step_matrix
+from pantohil.models.stability.step_roots import step_loop, step_spectral_radius
+
+# relaxations tried before the local refinement (the radius is not unimodal in mu everywhere)
+RELAXATION_GRID = (0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.95)
+
+
+@dataclass
+class StabilityProblem:
+    """One point of a map: the loop's operator, pantograph, strategy, latency and delay advance."""
+
+    update: str
+    pantograph: LinearPantograph
+    latency_steps: int  # force sample -> height it produces (1 = the unavoidable step)
+    delay_steps: int  # D, the advance of the commanded height (= latency when compensated)
+    kernel: np.ndarray | None = None  # circulant I_cc (ASM): first column
+    I_cc: np.ndarray | None = None  # dense I_cc (PFEM), or built from the kernel when needed
+    basis: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.update not in ("step", "span"):
+            raise ValueError(f"update must be 'step' or 'span', got {self.update!r}")
+        if self.latency_steps < 1:
+            raise ValueError(f"the loop latency must be at least one step, got {self.latency_steps}")
+        if self.kernel is None and self.I_cc is None:
+            raise ValueError("a stability problem needs the catenary operator")
+        if self.update == "step" and self.kernel is not None:
+            self._loop = step_loop(self.kernel, self.pantograph, self.delay_steps, self.latency_steps)
+        if self.update == "span":
+            if self.I_cc is None:
+                self.I_cc = circulant_dense(self.kernel)
+            if self.basis is None:
+                self.basis = circulant_range_basis(self.kernel) if self.kernel is not None else range_basis(self.I_cc)
+
+    def settings(self, mu: float) -> HilSettings:
+        return HilSettings(self.update, mu, self.delay_steps)
+
+    def spectral_radius(self, mu: float) -> float:
+        """rho(A) of Paper D eq. (13) at relaxation mu."""
+        if self.update == "span":
+            return reduced_span_map(self.I_cc, self.pantograph, self.settings(mu), self.latency_steps,
+                                    self.basis).spectral_radius
+        if self.kernel is not None:
+            rho = step_spectral_radius(self._loop, mu)
+            if math.isnan(rho):
+                rho = step_matrix(self.kernel, self.pantograph, self.settings(mu), self.latency_steps).spectral_radius
+            return rho
+        return span_map(self.I_cc, self.pantograph, self.settings(mu), self.latency_steps).spectral_radius
+
+
+def best_relaxation(problem: StabilityProblem, grid=RELAXATION_GRID, xatol: float = 2e-3) -> tuple[float, float]:
+    """The mu_c in (0, 1) with the smallest spectral radius (Paper D Figs. 5b, 6b): a grid, then Brent's
+    bounded search between the neighbours of the best grid point."""
+    values = [problem.spectral_radius(mu) for mu in grid]
+    i = int(np.argmin(values))
+    lo = grid[i - 1] if i > 0 else grid[0] / 2
+    hi = grid[i + 1] if i + 1 < len(grid) else 0.99
+    res = minimize_scalar(problem.spectral_radius, bounds=(lo, hi), method="bounded", options={"xatol": xatol})
+    if res.fun < values[i]:
+        return float(res.x), float(res.fun)
+    return float(grid[i]), float(values[i])
+
+
+def with_contact_stiffness(params: PantographParameters, kc: float) -> PantographParameters:
+    if not kc > 0:
+        raise ValueError(f"contact stiffness must be > 0, got {kc}")
+    return dataclasses.replace(params, contact_stiffness_N_m=float(kc))
+
+
+def contact_frequency_hz(params: PantographParameters, kc: np.ndarray) -> np.ndarray:
+    """Natural frequency of the head on its contact spring against k_c (the red curve of Paper D Figs. 5-7)."""
+    return np.sqrt((params.stiffnesses_N_m[0] + np.asarray(kc, dtype=float)) / params.masses_kg[0]) / (2 * np.pi)
+
+
+def problem_for(update: str, pantograph: PantographParameters, dt_s: float, latency_steps: int, delay_steps: int,
+                kernel: np.ndarray | None = None, I_cc: np.ndarray | None = None) -> StabilityProblem:
+    return StabilityProblem(update, linear_pantograph(pantograph, dt_s), latency_steps, delay_steps, kernel=kernel,
+                            I_cc=I_cc)

@@ -1,0 +1,185 @@
+"""Stability of the virtual HIL iteration (Paper D sec. 4 and appendix, eqs. A.1-A.16).
+
+The virtual HIL test in contact is linear: from one virtual span to the next its state X^b (the
+catenary's iteration state, the pantograph's integrator state, the force in hand and the heights in
+flight through the loop latency) obeys X^(b+1) = A X^b + B (Paper D eq. 13); the spectral radius of A
+decides convergence and is the rate per span. Three constructions of the same radius:
+
+- `span_map`: A itself, by running the loop of models/hil/loop.py on every unit state (any operator, both
+  strategies; dense, the reference the others are tested against);
+- `reduced_span_map` (span-by-span): A restricted to the range of I_cc. The components of z outside it
+  only decay by (1 - mu_c) per span and feed nothing back, so rho(A) = max(rho(A_r), |1 - mu_c|) with A_r
+  of size 2 rank(I_cc) + pantograph instead of 2N + pantograph;
+- `step_matrix` (step-by-step, circulant I_cc): for a circulant operator the step-by-step loop is
+  time-invariant from one step to the next (the relaxed forces form a delay line of N samples), so A is
+  the N-th power of a one-step matrix M and rho(A) = rho(M)^N.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from pantohil.models.hil.loop import HilSettings
+from pantohil.models.pantograph.linear import LinearPantograph
+
+
+@dataclass
+class SpanMap:
+    A: np.ndarray
+    blocks: dict  # name -> slice of the state vector
+    floor: float = 0.0  # spectral radius of the part left out of A (reduced maps)
+    power: int = 1  # A is a one-step matrix whose power is the span map
+
+    @property
+    def spectral_radius(self) -> float:
+        rho = float(np.max(np.abs(np.linalg.eigvals(self.A)))) ** self.power
+        return max(rho, self.floor)
+
+
+def circulant_dense(kernel: np.ndarray) -> np.ndarray:
+    """The N x N circulant operator whose column m is np.roll(kernel, m)."""
+    n = len(kernel)
+    return kernel[(np.arange(n)[:, None] - np.arange(n)[None, :]) % n]
+
+
+def _layout(sizes: dict) -> tuple[dict, int]:
+    blocks, start = {}, 0
+    for name, size in sizes.items():
+        blocks[name] = slice(start, start + size)
+        start += size
+    return blocks, start
+
+
+def span_map(I_cc: np.ndarray, pan: LinearPantograph, settings: HilSettings, latency_steps: int) -> SpanMap:
+    """A of X^(b+1) = A X^b (Paper D eqs. A.1-A.16) for the loop of models/hil/loop.py, with `latency_steps`
+    between a force sample and the height it produces (1 = the thesis's unavoidable step)."""
+    n = I_cc.shape[0]
+    lag = latency_steps - 1  # heights in flight between the catenary and the pantograph
+    span = settings.update == "span"
+    blocks, dim = _layout({"z_older": n if span else 0, "z": n if span else 0, "rf": 0 if span else n,
+                           "pantograph": pan.size, "force": 1, "in_flight": lag})
+    X = np.eye(dim)
+    if span:
+        z_older, z = X[blocks["z_older"]].copy(), X[blocks["z"]].copy()
+    else:  # the catenary's z is I rf in step-by-step updating: keep them consistent
+        rf = X[blocks["rf"]].copy()
+        z = I_cc @ rf
+    pan_state = X[blocks["pantograph"]].copy()
+    force = X[blocks["force"]][0].copy()
+    flight = deque(X[blocks["in_flight"]][i].copy() for i in range(lag))
+    block_force = np.zeros((n, dim))
+    mu, D = settings.relaxation, settings.delay_steps
+    for n_bar in range(n):
+        target = (n_bar + D) % n
+        if span:  # Paper D eq. (3): blend of the last two block vectors
+            block_force[n_bar] = force
+            w_new = (n_bar + 1) / n
+            command = (1 - w_new) * z_older[target] + w_new * z[target]
+            if n_bar == n - 1:  # eq. (A.8)
+                z_older, z = z, mu * (I_cc @ block_force) + (1 - mu) * z
+        else:  # Paper D eq. (10)
+            delta = mu * (force - rf[n_bar])
+            rf[n_bar] += delta
+            z += np.outer(I_cc[:, n_bar], delta)
+            command = z[target].copy()
+        flight.append(command)
+        z_act = flight.popleft()
+        pan_state = pan.Pp @ pan_state + np.outer(pan.pz, z_act) + np.outer(pan.pf, force)
+        force = pan.c @ pan_state + pan.cz * z_act
+    rows = [z_older, z] if span else [rf]
+    rows += [pan_state, force[None, :]]
+    rows += [np.vstack(list(flight))] if lag else []
+    return SpanMap(np.vstack(rows), blocks)
+
+
+def range_basis(I_cc: np.ndarray, rtol: float = 1e-10) -> np.ndarray:
+    """Orthonormal basis of the range of I_cc (the harmonics the frequency reduction keeps)."""
+    u, s, _ = np.linalg.svd(I_cc)
+    return u[:, s > rtol * s[0]]
+
+
+def circulant_range_basis(kernel: np.ndarray, rtol: float = 1e-10) -> np.ndarray:
+    """Real Fourier basis of the harmonics present in a circulant kernel (its range), without an SVD."""
+    n = len(kernel)
+    spec = np.abs(np.fft.rfft(kernel))
+    t = np.arange(n)
+    cols = []
+    for k in np.nonzero(spec > rtol * spec.max())[0]:
+        if k == 0 or 2 * k == n:
+            cols.append(np.cos(2 * np.pi * k * t / n) / np.sqrt(n))
+        else:
+            cols += [np.cos(2 * np.pi * k * t / n) * np.sqrt(2 / n), np.sin(2 * np.pi * k * t / n) * np.sqrt(2 / n)]
+    return np.column_stack(cols)
+
+
+def reduced_span_map(I_cc: np.ndarray, pan: LinearPantograph, settings: HilSettings, latency_steps: int,
+                     basis: np.ndarray | None = None) -> SpanMap:
+    """Span-by-span A (Paper D eqs. A.1-A.11) on z = Q a, z_older = Q c with Q a basis of range(I_cc)."""
+    if settings.update != "span":
+        raise ValueError("reduced_span_map is for span-by-span updating")
+    Q = range_basis(I_cc) if basis is None else basis
+    n, r = Q.shape
+    lag = latency_steps - 1
+    blocks, dim = _layout({"z_older": r, "z": r, "pantograph": pan.size, "force": 1, "in_flight": lag})
+    X = np.eye(dim)
+    c, a = X[blocks["z_older"]], X[blocks["z"]]
+    D = settings.delay_steps
+    targets = (np.arange(n) + D) % n
+    w_new = (np.arange(n) + 1) / n
+    # every command of the span at once, Paper D eq. (3) with the delay rotation (A.11)
+    commands = (1 - w_new)[:, None] * (Q[targets] @ c) + w_new[:, None] * (Q[targets] @ a)
+    pan_state = X[blocks["pantograph"]].copy()
+    force = X[blocks["force"]][0].copy()
+    in_flight = [X[blocks["in_flight"]][i] for i in range(lag)]
+    z_act_all = np.vstack(in_flight + [commands])  # heights reaching the pantograph, in order
+    block_force = np.empty((n, dim))
+    Pp, pz, pf, cc, cz = pan.Pp, pan.pz, pan.pf, pan.c, pan.cz
+    for n_bar in range(n):
+        block_force[n_bar] = force
+        z_act = z_act_all[n_bar]
+        pan_state = Pp @ pan_state + np.outer(pz, z_act) + np.outer(pf, force)
+        force = cc @ pan_state + cz * z_act
+    mu = settings.relaxation
+    a_new = mu * (Q.T @ (I_cc @ block_force)) + (1 - mu) * a  # eq. (A.8) in the basis
+    rows = [a, a_new, pan_state, force[None, :]]
+    rows += [commands[n - lag:]] if lag else []
+    return SpanMap(np.vstack(rows), blocks, floor=abs(1 - mu))
+
+
+def step_matrix(kernel: np.ndarray, pan: LinearPantograph, settings: HilSettings, latency_steps: int) -> SpanMap:
+    """One-step matrix M of the step-by-step loop (Paper D eqs. A.12-A.16) for a circulant I_cc; A = M^N.
+
+    State: g_k = the relaxed force of the sample k steps ahead (k = 0..N-1, g_0 is updated now), the
+    pantograph, the force in hand and the heights in flight.
+    """
+    if settings.update != "step":
+        raise ValueError("step_matrix is for step-by-step updating")
+    n = len(kernel)
+    lag = latency_steps - 1
+    blocks, dim = _layout({"rf": n, "pantograph": pan.size, "force": 1, "in_flight": lag})
+    g, p, f, fl = blocks["rf"], blocks["pantograph"], blocks["force"].start, blocks["in_flight"]
+    mu, D = settings.relaxation, settings.delay_steps
+    kappa = kernel[(D - np.arange(n)) % n]  # I_cc(n + D, n + k)
+    v = np.zeros(dim)  # the relaxed force written at this step, Paper D eq. (10)
+    v[g.start], v[f] = 1 - mu, mu
+    command = np.zeros(dim)
+    command[g] = kappa
+    command[g.start] = 0.0
+    command += kappa[0] * v
+    if lag:
+        z_act = np.zeros(dim)
+        z_act[fl.start] = 1.0
+    else:
+        z_act = command
+    M = np.zeros((dim, dim))
+    M[g.start:g.stop - 1, g.start + 1:g.stop] = np.eye(n - 1)  # the delay line moves one sample on
+    M[g.stop - 1] = v
+    M[p] = np.outer(pan.pz, z_act) + np.outer(pan.pf, np.eye(dim)[f])
+    M[p, p] += pan.Pp
+    M[f] = pan.c @ M[p] + pan.cz * z_act
+    if lag:
+        M[fl.start:fl.stop - 1, fl.start + 1:fl.stop] = np.eye(lag - 1)
+        M[fl.stop - 1] = command
+    return SpanMap(M, blocks, power=n)

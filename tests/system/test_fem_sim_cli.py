@@ -1,0 +1,82 @@
+"""Conventional finite-section simulation (`pantohil fem-sim`, Paper C sec. 6) and `pantohil compare`."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import CASES_DIR, REFERENCE_DIR, pantohil
+
+CASE = CASES_DIR / "pfem_benchmark_250.toml"
+REFERENCE = REFERENCE_DIR / "fem_sim_6.json"
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("fem") / "six"
+    proc = pantohil("fem-sim", str(CASE), "--spans", "6", "--central", "2", "--out", str(out), "--quiet")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return out
+
+
+@pytest.mark.slow
+def test_short_section_writes_its_run_folder(short_run):
+    s = json.loads((short_run / "summary.json").read_text())
+    assert s["central_spans"] == [2, 3] and s["catenary_label"] == "benchmark-like (reconstructed)"
+    for key in ("mean_N", "std_N", "stat_max_N", "stat_min_N", "max_N", "min_N", "contact_loss_pct"):
+        assert key in s["contact_force"]
+    c = s["contact_force"]
+    assert c["stat_max_N"] == pytest.approx(c["mean_N"] + 3 * c["std_N"])
+    assert s["max_support_uplift_m"] > 0
+    d = np.loadtxt(short_run / "central_spans.csv", delimiter=",", skiprows=1)
+    assert d.shape == (2 * 792, 4) and np.allclose(d[:792, 1], np.arange(792) * 1e-3)
+    for name in ("run.mcap", "force_along_section.png", "central_spans.png", "dropper_corrections.png"):
+        assert (short_run / name).stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_short_section_matches_its_reference_results(short_run):
+    """Regression against the statistics recorded on main (tests/reference); tolerance 0.5 %."""
+    ref = json.loads(REFERENCE.read_text())
+    s = json.loads((short_run / "summary.json").read_text())
+    for key in ("mean_N", "std_N", "max_N", "min_N"):
+        assert s["contact_force"][key] == pytest.approx(ref[key], rel=5e-3)
+
+
+@pytest.mark.slow
+def test_a_lost_contact_gives_zero_force_not_negative(tmp_path):
+    out = tmp_path / "loss"
+    proc = pantohil("fem-sim", str(CASE), "--spans", "6", "--central", "2", "--out", str(out), "--quiet",
+                    "--set", "pantograph.uplift_force_N=30", "--set", "run.speed_kmh=320")
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads((out / "summary.json").read_text())
+    assert s["contact_force"]["contact_loss_pct"] > 0
+    f = np.loadtxt(out / "central_spans.csv", delimiter=",", skiprows=1)[:, 2]
+    assert f.min() == 0.0 and np.all(f >= 0.0)
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--spans", "0"], "--spans: must be at least 1"),
+    (["--spans", "5"], "leave no central region"),
+])
+def test_bad_section_sizes_give_one_line(tmp_path, args, message):
+    proc = pantohil("fem-sim", str(CASE), *args, "--out", str(tmp_path / "x"))
+    assert proc.returncode == 2 and message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_case_without_a_catenary_file_gives_one_line(tmp_path):
+    proc = pantohil("fem-sim", str(CASES_DIR / "asm_250.toml"), "--spans", "10",
+                    "--out", str(tmp_path / "x"))
+    assert proc.returncode == 2 and "definition_file" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_compare_overlays_two_runs(short_run, tmp_path):
+    proc = pantohil("compare", str(short_run), str(short_run), "--out", str(tmp_path / "cmp"))
+    assert proc.returncode == 0, proc.stderr
+    r = json.loads((tmp_path / "cmp" / "compare.json").read_text())
+    assert r["rms_difference_N"] == 0.0 and r["std_difference_pct"] == 0.0
+    assert (tmp_path / "cmp" / "contact_force.png").stat().st_size > 0

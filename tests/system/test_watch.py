@@ -1,0 +1,74 @@
+"""`pantohil watch`: follows a run.mcap as it grows, reading only complete records, and shows the
+figures the run itself reports (summary.json's convergence history)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pantohil.orchestrator.mcap_follow import McapFollower
+from pantohil.orchestrator.recorder import McapWriter
+from pantohil.orchestrator.watch import span_line
+
+from conftest import pantohil
+
+GROUPS = {"/catenary": {"force_at_sample": "force [N]"}}
+
+
+def _span(writer: McapWriter, span: int, n: int = 50) -> None:
+    t = (span * n + np.arange(n)) * 1e-3
+    writer.write_block("/catenary", t, (100.0 + span + np.sin(t))[:, None])
+    writer.write_event("/convergence", (span + 1) * n * 1e-3, {"span": span, "change": 1.0 / (span + 1),
+                                                               "mean_N": 100.0 + span, "std_N": 0.7, "max_N": 101.0 + span,
+                                                               "min_N": 99.0 + span})
+    writer.flush()
+
+
+def test_follower_reads_complete_records_of_a_growing_file(tmp_path):
+    path = tmp_path / "run.mcap"
+    writer = McapWriter(path, GROUPS, {"case": "growing"})
+    follower = McapFollower(path)
+    seen = []
+    for span in range(40):  # enough for several chunks
+        _span(writer, span)
+        seen += follower.poll()
+    writer.close()
+    seen += follower.poll()
+    assert follower.finished and follower.metadata == {"case": "growing"}
+    assert [m["span"] for topic, _, m in seen if topic == "/convergence"] == list(range(40))
+    forces = [m["force_at_sample"] for topic, _, m in seen if topic == "/catenary"]
+    assert len(forces) == 40 * 50 and forces[0] == 100.0
+    whole = path.read_bytes()
+    for cut in (len(whole) // 3, len(whole) // 2, len(whole) - 3):  # a file cut anywhere: what is complete
+        (tmp_path / "cut.mcap").write_bytes(whole[:cut])
+        part = McapFollower(tmp_path / "cut.mcap").poll()
+        spans = [m["span"] for topic, _, m in part if topic == "/convergence"]
+        assert spans == list(range(len(spans)))  # a prefix, in order, nothing invented
+
+
+@pytest.mark.slow
+def test_watch_follows_a_run_to_its_end(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    watcher = subprocess.Popen([sys.executable, "-m", "pantohil.orchestrator.cli", "watch", str(out),
+                                "--interval", "0.1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    run = pantohil("run", "--out", str(out), "--quiet", "--set", "run.max_spans=6")
+    assert run.returncode == 1, run.stderr
+    lines, err = watcher.communicate(timeout=600)
+    assert watcher.returncode == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    expected = [span_line(rec) for rec in summary["convergence"]]
+    assert lines.splitlines() == expected + [f"{summary['status']}: {summary['message']}"]
+
+
+def test_watch_bad_folder_is_one_line_and_exit_2(tmp_path):
+    for args in ([str(tmp_path / "missing")], [str(tmp_path), "--once"], [str(tmp_path), "--interval", "0"]):
+        proc = pantohil("watch", *args)
+        assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "watch:" in proc.stderr, proc.stderr
+    (tmp_path / "run.mcap").write_bytes(b"not an mcap file at all")
+    proc = pantohil("watch", str(tmp_path))
+    assert proc.returncode == 2 and "not an MCAP file" in proc.stderr
