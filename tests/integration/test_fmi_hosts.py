@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from conftest import load_run, pantohil
+from conftest import CASES_DIR, load_run, pantohil
 from pantohil.builder.system import CONNECTIONS, FMU_NAMES
 
 HOST_SOURCE = Path(__file__).parent / "hosts" / "jacobi_host.c"
-CASES = Path(__file__).resolve().parents[1] / "models" / "cases"
+CASES = CASES_DIR
 # what a host that never heard of Python has in its environment: none of Python's own variables
 PYTHON_VARIABLES = ("LD_PRELOAD", "PYTHONHOME", "PYTHONPATH", "PANTOHIL_LIBPYTHON", "VIRTUAL_ENV")
 
@@ -74,6 +74,7 @@ def _host_matches_fmpy(host: Path, run_folder: Path, tmp_path: Path) -> float:
     return float(np.max(np.abs(values - span[:, 3])))
 
 
+@pytest.mark.slow
 def test_c_host_without_python_reproduces_the_default_case(host, default_run, tmp_path):
     # steady_span.csv holds 13 significant digits: 1e-10 N at 130 N, below the 1e-9 N asked for
     assert _host_matches_fmpy(host, default_run, tmp_path) <= 1e-9
@@ -87,6 +88,7 @@ def test_c_host_without_python_reproduces_the_pfem_case(host, tmp_path):
     assert _host_matches_fmpy(host, run, tmp_path / "host") <= 1e-9
 
 
+@pytest.mark.slow
 def test_c_host_gets_an_error_and_a_message_for_a_wrong_step(host, default_run, tmp_path):
     fmus = {name: default_run / "fmus" / f"{name}.fmu" for name in FMU_NAMES}
     proc = _run_host(host, _plan(fmus, tmp_path, 0, 0, ("pantograph", 0.002)))
@@ -94,6 +96,7 @@ def test_c_host_gets_an_error_and_a_message_for_a_wrong_step(host, default_run, 
     assert "communication step of 0.002 s" in proc.stdout and "fixed step of 0.001 s" in proc.stdout
 
 
+@pytest.mark.slow
 def test_c_host_names_a_missing_libpython(host, default_run, tmp_path):
     fmus = {name: default_run / "fmus" / f"{name}.fmu" for name in FMU_NAMES}
     plan = _plan(fmus, tmp_path, 1, 1)
@@ -123,6 +126,7 @@ os._exit(0)  # no interpreter teardown with pythonfmu's library loaded
 """
 
 
+@pytest.mark.slow
 def test_fmpy_gets_an_error_and_a_message_for_a_wrong_step(default_run):
     for name in FMU_NAMES:
         proc = subprocess.run([sys.executable, "-c", WRONG_STEP_IN_FMPY, str(default_run / "fmus" / f"{name}.fmu")],
@@ -141,6 +145,7 @@ os._exit(0)
 """
 
 
+@pytest.mark.slow
 def test_simulate_fmu_takes_step_and_stop_time_from_the_model_description(tmp_path):
     out = tmp_path / "fmus"
     proc = pantohil("build", "--out", str(out))
