@@ -18,10 +18,12 @@ def lowpass_periodic(x: np.ndarray, dt_s: float, cutoff_hz: float = 20.0, order:
 
 
 def force_statistics(f: np.ndarray) -> dict:
+    """Mean, standard deviation, maximum and minimum of a contact force [N]."""
     f = np.asarray(f, dtype=float)
     return {"mean_N": float(np.mean(f)), "std_N": float(np.std(f)),
             "max_N": float(np.max(f)), "min_N": float(np.min(f))}
 
 
 def rms(x: np.ndarray) -> float:
+    """Root mean square of a sequence."""
     return float(np.sqrt(np.mean(np.square(x))))

@@ -47,6 +47,7 @@ class CirculantOperator:
         return np.fft.irfft(np.fft.rfft(self.kernel) * np.fft.rfft(f), n=self.n)
 
     def dense(self) -> np.ndarray:
+        """The N x N matrix I_cc(n, n_hat) = kernel[(n - n_hat) mod N] (Paper D eq. 1)."""
         idx = (np.arange(self.n)[:, None] - np.arange(self.n)[None, :]) % self.n
         return self.kernel[idx]
 

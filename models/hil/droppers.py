@@ -16,6 +16,7 @@ from pantohil.models.catenary.receptance import reduce_harmonics
 
 
 class PfemHil:
+    """HIL iteration on PFEM operators with dropper slackening (Paper C sec. 5.3, Paper D eqs. 11-12)."""
     # fixed after construction (not part of an FMU state)
     CONSTANT_ATTRIBUTES = ("ops", "s", "z0", "_dc", "_dd", "_basis", "f0", "kd", "win", "_d", "_window_index",
                            "_basis_at", "_dd_at", "_slack_below")
@@ -61,16 +62,26 @@ class PfemHil:
 
     @property
     def sample(self) -> int:
+        """Label n_bar of the sample the next measured force belongs to."""
         return self.k % self.n
 
     @property
     def span(self) -> int:
+        """Index b of the virtual span (block) the next measured force belongs to."""
         return self.k // self.n
 
     def current_height(self, label: int) -> float:
+        """The converging estimate of the contact-wire height at a sample."""
         return float(self.z[label])
 
     def step(self, force: float) -> float:
+        """Take the force measured at the current sample and return the height to command.
+
+        The relaxed force increment updates z and the dropper elongations (Paper C eqs. 34-35, Paper D
+        eq. 10); the slack droppers' correction forces are solved at their current instants (Paper C
+        eq. 40); the command is taken D samples ahead, from z or from the blend of the last two blocks
+        (Paper D eq. 3), and scaled by the initial ramp.
+        """
         n_bar = self.k % self.n
         if not math.isnan(force):
             self.last_force[n_bar] = force

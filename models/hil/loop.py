@@ -17,6 +17,7 @@ UPDATES = ("step", "span")
 
 @dataclass(frozen=True)
 class HilSettings:
+    """Settings of the HIL iteration: update, relaxation mu_c, delay advance D, ramp N_r (Paper D sec. 3)."""
     update: str = "step"  # "step": Paper D eq. (2); "span": Paper D eq. (3)
     relaxation: float = 0.1  # mu_c, Paper D eq. (9)-(10)
     delay_steps: int = 1  # D: 1 is the unavoidable one-step loop (Paper D Fig. 4)
@@ -53,6 +54,7 @@ class PeriodicHil:
 
     @property
     def span(self) -> int:
+        """Index b of the virtual span (block) the next measured force belongs to."""
         return self.k // self.n
 
     def current_height(self, label: int) -> float:
@@ -60,6 +62,12 @@ class PeriodicHil:
         return float(self.z[label])
 
     def step(self, force: float) -> float:
+        """Take the force measured at the current sample and return the height to command.
+
+        Step-by-step: z += mu_c I_cc(n_bar) (f - f_relaxed) (Paper D eqs. 2, 10) and the command is z at
+        n_bar + D; span-by-span: the blend of the last two block snapshots (eq. 3). A NaN force keeps the
+        sample's previous value. The command is scaled by the initial ramp (sec. 3.6).
+        """
         n_bar = self.k % self.n
         mu = self.s.relaxation
         measured = not math.isnan(force)  # NaN: not measured; the sample keeps its previous value
@@ -101,6 +109,7 @@ class ConvergenceMonitor:
         self._prev = None
 
     def close_span(self, span: int, force: np.ndarray) -> dict:
+        """Record one finished span: its change rms(f^b - f^(b-1)) / std(f^b), mean, std, max and min."""
         std = float(np.std(force))
         if self._prev is None:
             change = float("inf")

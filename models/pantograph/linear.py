@@ -17,6 +17,7 @@ from pantohil.models.pantograph.lumped import ChainPantograph, HhtConstants, Pan
 
 @dataclass(frozen=True)
 class LinearPantograph:
+    """The pantograph's HHT step as a linear map x+ = Pp x + pz z + pf f, f+ = c x+ + cz z (Paper D app.)."""
     Pp: np.ndarray  # state to state
     pz: np.ndarray  # imposed height to state
     pf: np.ndarray  # previous force to state
@@ -25,6 +26,7 @@ class LinearPantograph:
 
     @property
     def size(self) -> int:
+        """Number of states of the step map."""
         return len(self.pz)
 
     def transfer(self, lam: np.ndarray) -> np.ndarray:

@@ -27,6 +27,7 @@ from pantohil.models.pantograph.linear import LinearPantograph
 
 @dataclass
 class SpanMap:
+    """The span-to-span map X^(b+1) = A X^b + B of the HIL iteration (Paper D eq. 13), with its state blocks."""
     A: np.ndarray
     blocks: dict  # name -> slice of the state vector
     floor: float = 0.0  # spectral radius of the part left out of A (reduced maps)
@@ -34,6 +35,7 @@ class SpanMap:
 
     @property
     def spectral_radius(self) -> float:
+        """rho(A)^power, at least the radius of the part a reduced map leaves out (Paper D eq. 13)."""
         rho = float(np.max(np.abs(np.linalg.eigvals(self.A)))) ** self.power
         return max(rho, self.floor)
 

@@ -25,6 +25,7 @@ from pantohil.models.pantograph.linear import LinearPantograph
 
 @dataclass
 class StepLoop:
+    """The one-step loop of step-by-step updating with a circulant operator, for its characteristic roots."""
     n: int
     lag: int
     kappa: np.ndarray  # I_cc(n + D, n + k), k = 0..N-1
@@ -41,9 +42,11 @@ class StepLoop:
         return self.trace_pantograph + (mu * self.direct if self.lag == 0 else 0.0)
 
     def H(self, lam):
+        """The pantograph step's transfer H(lambda) = F / Z from its poles and residues."""
         return (self.h_residues / (lam[..., None] - self.h_poles)).sum(axis=-1)
 
     def dH(self, lam):
+        """dH/dlambda of the pantograph step's transfer."""
         return -(self.h_residues / (lam[..., None] - self.h_poles) ** 2).sum(axis=-1)
 
 
@@ -60,6 +63,9 @@ def pantograph_transfer(pan: LinearPantograph) -> tuple[np.ndarray, np.ndarray]:
 
 def step_loop(kernel: np.ndarray, pan: LinearPantograph, delay_steps: int, latency_steps: int,
               margin: int = 6, rtol: float = 1e-10) -> StepLoop:
+    """The one-step loop of a circulant kernel, a pantograph and a delay advance: the harmonics kept,
+    the pantograph's poles and residues and the trace terms the root check uses.
+    """
     n = len(kernel)
     kappa = kernel[(delay_steps - np.arange(n)) % n]
     spec = np.fft.fft(kappa) / n

@@ -64,6 +64,7 @@ class Poles:
 
     @property
     def all(self) -> tuple:
+        """The three poles, those below the real axis first."""
         return self.lower + self.upper
 
 
