@@ -33,6 +33,7 @@ SOURCES = (pfem_frf, pfem_blocks, pfem_operators, fe_model, catenary_definition,
 
 @dataclass
 class OperatorBuild:
+    """Where a case's PFEM operators are, whether they came from the cache, and their cost and size."""
     path: Path
     cached: bool
     build_s: float
@@ -41,11 +42,13 @@ class OperatorBuild:
     key: str
 
     def summary(self) -> dict:
+        """The operators' part of summary.json: build time, cached, frequencies, bytes, file, key."""
         return {"build_s": self.build_s, "cached": self.cached, "n_frequencies": self.n_frequencies,
                 "bytes": self.bytes, "file": str(self.path), "key": self.key}
 
 
 def operator_key(case: Case) -> str:
+    """Cache key of a case's operators: a hash of the catenary file, the model sources and the settings."""
     h = hashlib.sha256(f"pantohil operators v{FORMAT_VERSION}".encode())
     h.update(Path(case.definition_path).read_bytes())
     for module in SOURCES:

@@ -48,11 +48,13 @@ class Message:
 
 
 def encode(m: Message) -> bytes:
+    """The 48-byte datagram of a message: the little-endian body and its CRC-32 (docs/udp-protocol.md)."""
     body = _BODY.pack(MAGIC, VERSION, m.type, 0, m.seq & 0xFFFFFFFF, m.t_ns, m.a, m.b, m.u, m.w)
     return body + struct.pack("<I", zlib.crc32(body))
 
 
 def decode(data: bytes) -> Message:
+    """The message of a 48-byte datagram; Malformed names a wrong size, CRC, magic, version or type."""
     if len(data) != SIZE:
         raise Malformed(f"size {len(data)} bytes, expected {SIZE}")
     body = data[:-4]

@@ -70,6 +70,7 @@ class LibcosimMaster(RecordingMaster):
         self.k += steps
 
     def step(self) -> None:
+        """Advance libcosim by one step and record the watched outputs and inputs of that step."""
         k, obs = self.k, self._observer
         t0 = time.perf_counter_ns()
         if not self._ex.step():
@@ -90,6 +91,7 @@ class LibcosimMaster(RecordingMaster):
         return {"libcosim": float(np.median(self.step_ns[self.names[0]][: self.k])) / 1000.0} if self.k else {}
 
     def close(self) -> None:
+        """Release the execution (its slaves are freed when it is collected; the FMU libraries stay loaded)."""
         self._ex = None  # the execution frees its slaves when collected
 
 

@@ -21,6 +21,7 @@ _HEADER = struct.Struct("<BQ")
 
 
 class McapFollowError(ValueError):
+    """The file being followed is not an MCAP file, or a record in it cannot be read."""
     pass
 
 
@@ -47,6 +48,7 @@ class McapFollower:
         self._topics: dict[int, str] = {}
 
     def poll(self) -> list[tuple[str, int, dict]]:
+        """The messages of the records completed since the last poll, as (topic, log time ns, JSON)."""
         if self.finished:
             return []
         with open(self.path, "rb") as f:

@@ -18,10 +18,12 @@ TEMPLATES = Path(build_fmus.__file__).parent / "partner"
 
 
 def case_text(case: Case) -> str:
+    """The case file as written, the text an SSP file carries."""
     return Path(case.source).read_text()
 
 
 def make_ssp(case: Case, fmus: dict[str, Path], path: Path, overrides: list[str]) -> Path:
+    """Write the SSP 1.0 file of a case's system (FMUs, connections, start values, the case text) to `path`."""
     d = delay_plan(case)["delay_steps"]
     params = build_fmus.fmu_parameters(case, d)
     text = case_text(case)
@@ -33,6 +35,11 @@ def make_ssp(case: Case, fmus: dict[str, Path], path: Path, overrides: list[str]
 
 
 def make_package(case: Case, out_dir: Path, overrides: list[str], progress: bool = True) -> Path:
+    """Write a partner package for a case into `out_dir`, all or nothing.
+
+    A reference run of the case, its FMUs, SSP and OSP files, a standalone fmpy runner, requirements and
+    a README with the case's numbers; built in a staging folder and renamed into place.
+    """
     if case.values["profile"]["source"] == "csv":
         raise CaseError("profile.source: a package cannot yet carry a CSV profile; use a dropper profile")
     out_dir = Path(out_dir)

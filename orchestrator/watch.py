@@ -52,10 +52,12 @@ class RunView:
 
     @property
     def simulated_s(self) -> float:
+        """Simulated time of the newest per-step message read [s]."""
         return max((m.get("t", 0.0) for m in self.latest.values()), default=0.0)
 
 
 def span_line(rec: dict) -> str:
+    """One line for a closed span: its change, mean, std, max and min."""
     change = rec.get("change")
     change_s = "-" if change is None or not math.isfinite(change) else f"{change:.3e}"
     return (f"span {rec['span']}: change {change_s}, mean {rec['mean_N']:.2f} N, std {rec['std_N']:.2f} N, "
@@ -63,6 +65,7 @@ def span_line(rec: dict) -> str:
 
 
 def sparkline(values: list[float], low: float, high: float, width: int = SPARK_WIDTH) -> str:
+    """The values as a row of block characters between `low` and `high`, at most `width` wide."""
     if not values:
         return ""
     step = max(1, math.ceil(len(values) / width))
@@ -107,6 +110,7 @@ def _latest_table(view: RunView) -> Table:
 
 
 def render(view: RunView, folder: Path, status: str) -> Group:
+    """The terminal view of a run: header, span history, the force of the last spans, newest signals."""
     meta = view.metadata
     head = Text(f"{folder}  case {meta.get('case', '?')} ({meta.get('topology', '?')}, master "
                 f"{meta.get('master', '?')})  spans {len(view.history)}  {status}", style="bold")

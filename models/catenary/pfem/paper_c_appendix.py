@@ -42,6 +42,11 @@ def appendix_hil(op: np.ndarray, k: float, z0: float, tol: float = 1e-10, max_bl
 
 
 def paper_c_appendix(data: AppendixData = AppendixData()) -> dict:
+    """Paper C Appendix A: H(w_3000), I(w_3000), the 6 x 6 operator II and the HIL test against a spring.
+
+    The spring f = k_z (z_0 - z) is iterated with Paper C eq. (25) (no relaxation, no delay); returns the
+    printed quantities and the first and steady forces.
+    """
     cb = appendix_block()
     blk = cb.block
     T = blk.length_m / data.speed_m_s
