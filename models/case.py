@@ -1,12 +1,13 @@
-"""Case files (TOML): loading, `--set` overrides, validation and the derived run quantities.
+"""Case files (TOML): loading, overrides, validation and the derived run quantities.
 
-Every key is declared once in SCHEMA with its type, default, range and unit; an unknown key, a value
-out of range or an inconsistent combination raises CaseError with one line naming the key.
+Every key is declared once, in models/parameters.py, with its type, default, range and unit; an unknown
+key, a value out of range or an inconsistent combination raises CaseError with one line naming the key.
 """
 from __future__ import annotations
 
 import copy
 import math
+import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,11 +15,23 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.catenary.asm.string import AsmParameters, receptance_direct
-from pantohil.models.hil.loop import UPDATES, HilSettings
-from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.catenary.profile import DropperProfile, ProfileError, TabulatedProfile, read_profile_csv
 from pantohil.models.catenary.receptance import harmonic_count
 from pantohil.models.data import CASES_DIR
+from pantohil.models.hil.loop import HilSettings
+from pantohil.models.input_files import InputFileError, load_toml
+from pantohil.models.pantograph.lumped import PantographParameters
+from pantohil.models.parameters import (
+    AUTO,
+    MAX_LIST_LENGTH,
+    MAX_SAMPLES_PER_SPAN,
+    REQUIRED,
+    SECTIONS,
+    XS_INT_MAX,
+    XS_INT_MIN,
+    Key,
+    section_keys,
+)
 from pantohil.models.rig.chain import RigParameters
 
 DEFAULT_CASE = CASES_DIR / "asm_250.toml"
@@ -28,166 +41,106 @@ class CaseError(ValueError):
     """A case that cannot run; the message is one line naming the key."""
 
 
-def _pos(x):
-    return x > 0
+SCHEMA: dict[str, dict[str, Key]] = {section: section_keys(section) for section in SECTIONS}
+"""Every case key, by section, derived from the declarations in models/parameters.py."""
 
-
-def _nonneg(x):
-    return x >= 0
-
-
-def _unit(x):
-    return 0 < x <= 1
-
-
-_REQUIRED = object()
-
-# section -> key -> (type, default, check, requirement text, unit/description)
-SCHEMA = {
-    "case": {
-        "name": (str, "unnamed", None, "", "case name"),
-        "description": (str, "", None, "", "free text"),
-    },
-    "catenary": {
-        "model": (str, "asm", lambda s: s in ("asm", "pfem"), "must be \"asm\" or \"pfem\"", "catenary model"),
-        "definition_file": (str, "", None, "", "catenary file (relative to the case): ASM2 fitted to its FE model, "
-                            "or the span of the PFEM"),
-        "span_m": (float, _REQUIRED, _pos, "must be > 0", "span length [m]"),
-        "tension_N": (float, _REQUIRED, _pos, "must be > 0", "contact-wire tension T [N]"),
-        "density_kg_m": (float, _REQUIRED, _pos, "must be > 0", "string linear density mu [kg/m]"),
-        "support_stiffness_N_m2": (float, _REQUIRED, _pos, "must be > 0", "support stiffness kbar [N/m^2]"),
-        "alpha_1_s": (float, 0.0125, _nonneg, "must be >= 0", "Rayleigh alpha [1/s]"),
-        "beta_s": (float, 1e-4, _nonneg, "must be >= 0", "Rayleigh beta [s]"),
-    },
-    "profile": {
-        "source": (str, "droppers", lambda s: s in ("droppers", "csv", "catenary"),
-                   "must be \"droppers\", \"csv\" or \"catenary\"", "where z0 comes from"),
-        "catenary_file": (str, "", None, "", "catenary file whose form-found z0 to use, relative to the case"),
-        "dropper_spacing_m": (list, [], None, "", "intervals support-dropper-...-support [m]"),
-        "wire_mass_kg_m": (float, 1.374, _pos, "must be > 0", "contact-wire mass per length [kg/m]"),
-        "wire_tension_N": (float, 0.0, _nonneg, "must be >= 0", "tension for the sag (0: catenary.tension_N) [N]"),
-        "presag_m": (float, 0.0, None, "", "mid-span pre-sag [m]"),
-        "csv_file": (str, "", None, "", "x_m,z0_m file, relative to the case file"),
-    },
-    "pantograph": {
-        "model": (str, "chain", lambda s: s in ("chain", "rigid_mass"), "must be \"chain\" or \"rigid_mass\"",
-                  "pantograph model"),
-        "masses_kg": (list, [6.6, 5.8, 5.8], None, "", "masses, head first [kg]"),
-        "stiffnesses_N_m": (list, [7000.0, 14100.0, 80.0], None, "", "element stiffnesses [N/m]"),
-        "dampings_Ns_m": (list, [0.0, 0.0, 70.0], None, "", "element dampings [N s/m]"),
-        "contact_stiffness_N_m": (float, 50000.0, _pos, "must be > 0", "penalty stiffness k_c [N/m]"),
-        "uplift_force_N": (float, -1.0, None, "", "uplift force; omit for 0.00097 v^2 + 70 [N]"),
-        "gravity_m_s2": (float, 0.0, _nonneg, "must be >= 0", "gravity felt by a rigid mass [m/s^2]"),
-    },
-    "rig": {
-        "delay_steps": (int, 0, _nonneg, "must be >= 0", "pure delay [steps]"),
-        "comm_decimation": (int, 1, _pos, "must be >= 1", "N_com [-]"),
-        "servo_bandwidth_hz": (float, 0.0, _nonneg, "must be >= 0", "servo natural frequency, 0 = ideal [Hz]"),
-        "servo_damping": (float, 0.7, _pos, "must be > 0", "servo damping ratio [-]"),
-        "loadcell_cutoff_hz": (float, 0.0, _nonneg, "must be >= 0", "load-cell low-pass, 0 = none [Hz]"),
-        "force_offset_N": (float, 0.0, None, "", "force added to the measurement [N]"),
-        "noise_std_N": (float, 0.0, _nonneg, "must be >= 0", "measurement noise std [N]"),
-        "noise_seed": (int, 0, _nonneg, "must be >= 0", "noise seed [-]"),
-    },
-    "link": {
-        "receive_timeout_s": (float, 0.0003, _pos, "must be > 0", "how long a step waits for the awaited answer [s]"),
-        "pipeline_steps": (int, 1, lambda p: p in (0, 1), "must be 0 or 1",
-                           "1: use the answer to the previous command (no waiting on the network) [steps]"),
-        "tolerated_losses": (int, 50, _nonneg, "must be >= 0", "consecutive missing answers before a fault [-]"),
-        "local_port": (int, 0, lambda p: 0 <= p < 65536, "must be a port number (0: any)", "local UDP port [-]"),
-    },
-    "actuator": {
-        "stroke_min_m": (float, -0.12, None, "", "lowest actuator position [m]"),
-        "stroke_max_m": (float, 0.12, None, "", "highest actuator position [m]"),
-        "max_velocity_m_s": (float, 5.4, _pos, "must be > 0", "velocity limit (LinMot PS10-70x240U) [m/s]"),
-        "max_acceleration_m_s2": (float, 300.0, _pos, "must be > 0", "acceleration limit [m/s^2]"),
-    },
-    "hil": {
-        "update": (str, "step", lambda s: s in UPDATES, "must be \"step\" or \"span\"", "update strategy"),
-        "relaxation": (float, 0.1, _unit, "must be in (0, 1]", "mu_c [-]"),
-        "max_frequency_hz": (float, 25.0, _pos, "must be > 0", "f_max of the frequency reduction [Hz]"),
-        "ramp_steps": (int, 0, _nonneg, "must be >= 0", "initial ramp N_r [steps]"),
-        "delay_compensation": (bool, True, None, "", "advance the height by the rig's latency"),
-        "delay_steps": (int, -1, None, "", "override the delay advance D; omit to compute it [steps]"),
-    },
-    "pfem": {
-        "droppers": (bool, True, None, "", "dropper slackening (Paper C sec. 5); false: the linear catenary"),
-        "dropper_max_frequency_hz": (float, 20.0, _pos, "must be > 0", "f_max of the elongations, N_hd [Hz]"),
-        "dropper_relaxation": (float, 1.0, _unit, "must be in (0, 1]", "mu_d [-]"),
-        "omega_max_rad_s": (float, 750.0, _pos, "must be > 0", "highest frequency of the transform [rad/s]"),
-        "grid_resolution": (float, 0.094, _pos, "must be > 0", "frequency step / (alpha + beta w^2) [-]"),
-        "taper": (float, 0.25, lambda x: 0 <= x < 1, "must be in [0, 1)", "tapered top fraction of [0, w_max] [-]"),
-    },
-    "run": {
-        "speed_kmh": (float, _REQUIRED, _pos, "must be > 0", "pantograph speed [km/h]"),
-        "dt_s": (float, 0.001, _pos, "must be > 0", "target time step; adjusted to fit the span [s]"),
-        "max_spans": (int, 200, _pos, "must be >= 1", "span limit [-]"),
-        "convergence_tol": (float, 1e-4, _pos, "must be > 0", "rms span-to-span change / std [-]"),
-        "force_limit_N": (float, 2000.0, _pos, "must be > 0", "|force| beyond this is divergence [N]"),
-        "height_limit_m": (float, 1.0, _pos, "must be > 0", "|height| beyond this is divergence [m]"),
-        "divergence_change": (float, 0.8, _pos, "must be > 0", "median span-to-span change / std beyond which "
-                              "the iteration has diverged (a limit cycle with contact loss) [-]"),
-        "divergence_spans": (int, 10, _pos, "must be > 0", "spans over which that median is taken [-]"),
-    },
-}
+_SET_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
 def load_case_dict(path: Path | None) -> tuple[dict, Path]:
     path = Path(path) if path is not None else DEFAULT_CASE
     try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise CaseError(f"case file {path} does not exist") from None
-    except OSError as exc:
-        raise CaseError(f"case file {path}: {exc.strerror}") from None
-    try:
-        return tomllib.loads(text), path
-    except tomllib.TOMLDecodeError as exc:
-        raise CaseError(f"case file {path} is not valid TOML: {exc}") from None
+        return load_toml(path, "case file"), path
+    except InputFileError as exc:
+        raise CaseError(str(exc)) from None
 
 
 def apply_overrides(raw: dict, overrides: list[str]) -> dict:
     """Apply `section.key=value` overrides; values are parsed as TOML, else taken as strings."""
     out = copy.deepcopy(raw)
     for item in overrides:
+        if any(ch in item for ch in "\n\r\0"):
+            raise CaseError(f"override {item.splitlines()[0] if item.strip() else ''!r}...: a value must be one line")
         if "=" not in item or "." not in item.split("=", 1)[0]:
-            raise CaseError(f"--set {item!r}: expected section.key=value")
+            raise CaseError(f"override {item!r}: expected section.key=value")
         dotted, value = item.split("=", 1)
-        section, key = dotted.strip().split(".", 1)
+        section, key = (part.strip() for part in dotted.split(".", 1))
+        if not _SET_KEY.fullmatch(section) or not _SET_KEY.fullmatch(key):
+            raise CaseError(f"override {item!r}: expected section.key=value with plain names")
         try:
             parsed = tomllib.loads(f"v = {value.strip()}")["v"]
         except tomllib.TOMLDecodeError:
             parsed = value.strip()
-        out.setdefault(section, {})[key] = parsed
+        table = out.setdefault(section, {})
+        if not isinstance(table, dict):
+            raise CaseError(f"override {item!r}: {section} is not a table in the case file (it is {table!r})")
+        table[key] = parsed
     return out
 
 
-def _coerce(section: str, key: str, value, typ):
-    name = f"{section}.{key}"
-    if typ is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise CaseError(f"{name}: expected a number, got {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise CaseError(f"{name}: must be finite, got {value!r}")
-        return value
-    if typ is int:
+def _coerce_number(key: Key, value):
+    name, p = key.dotted, key.param
+    if key.type is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise CaseError(f"{name}: expected an integer, got {value!r}")
+        if not XS_INT_MIN <= value <= XS_INT_MAX:
+            raise CaseError(f"{name}: {value} is outside the FMI integer range [{XS_INT_MIN}, {XS_INT_MAX}]")
+    elif isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise CaseError(f"{name}: expected a number, got {value!r}")
+    elif not math.isfinite(value):
+        raise CaseError(f"{name}: must be a finite number, got {value!r}")
+    else:
+        value = float(value)
+    if not p.contains(value):
+        unit = f" {p.unit}" if p.unit != "1" else ""
+        shown = str(value) if isinstance(value, int) else f"{value:g}"
+        raise CaseError(f"{name}: {shown}{unit} is outside its range {p.range_text()}")
+    return value
+
+
+def _coerce_list(key: Key, value) -> list:
+    name, p = key.dotted, key.param
+    if not isinstance(value, list):
+        raise CaseError(f"{name}: expected a list of numbers, got {value!r}")
+    if len(value) > MAX_LIST_LENGTH:
+        raise CaseError(f"{name}: {len(value)} values, above the limit of {MAX_LIST_LENGTH}")
+    for i, v in enumerate(value):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise CaseError(f"{name}[{i}]: expected a number, got {v!r}")
+        if not math.isfinite(v):
+            raise CaseError(f"{name}[{i}]: must be a finite number, got {v!r}")
+        if not p.contains(v):
+            raise CaseError(f"{name}[{i}]: {v:g} {p.unit} is outside its range {p.range_text()}".replace(" 1 is", " is"))
+    return [float(v) for v in value]
+
+
+def _coerce(key: Key, value):
+    """A given value checked against its declaration (type, finiteness, FMI type, range, choices)."""
+    name, p = key.dotted, key.param
+    if p.auto and value == AUTO:
+        return AUTO
+    if p.choices:
+        if isinstance(value, bool) != isinstance(p.choices[0], bool) or value not in p.choices:
+            raise CaseError(f"{name}: must be {p.range_text().replace(' | ', ' or ')} (got {value!r})")
         return value
-    if typ is bool and not isinstance(value, bool):
+    if key.type in (int, float):
+        try:
+            return _coerce_number(key, value)
+        except CaseError as exc:
+            if p.auto and not isinstance(value, str):
+                raise CaseError(f"{exc} (or \"{AUTO}\")") from None
+            raise
+    if key.type is bool and not isinstance(value, bool):
         raise CaseError(f"{name}: expected true or false, got {value!r}")
-    if typ is str and not isinstance(value, str):
+    if key.type is str and not isinstance(value, str):
         raise CaseError(f"{name}: expected a string, got {value!r}")
-    if typ is list:
-        if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-            raise CaseError(f"{name}: expected a list of numbers, got {value!r}")
-        return [float(v) for v in value]
+    if key.type is tuple:
+        return _coerce_list(key, value)
     return value
 
 
 def validate(raw: dict) -> dict:
-    """Fill defaults and check every key against SCHEMA; returns {section: {key: value}}."""
+    """Fill defaults and check every key against its declaration; returns {section: {key: value}}."""
     for section in raw:
         if section not in SCHEMA:
             raise CaseError(f"{section}: unknown section (known: {', '.join(SCHEMA)})")
@@ -196,20 +149,18 @@ def validate(raw: dict) -> dict:
     out = {}
     for section, keys in SCHEMA.items():
         given = raw.get(section, {})
-        for key in given:
-            if key not in keys:
-                raise CaseError(f"{section}.{key}: unknown key (known: {', '.join(keys)})")
+        for name in given:
+            if name not in keys:
+                raise CaseError(f"{section}.{name}: unknown key (known: {', '.join(keys)})")
         out[section] = {}
-        for key, (typ, default, check, req, _doc) in keys.items():
-            if key in given:
-                value = _coerce(section, key, given[key], typ)
-            elif default is _REQUIRED:
-                raise CaseError(f"{section}.{key}: missing (required)")
+        for name, key in keys.items():
+            if name in given:
+                value = _coerce(key, given[name])
+            elif key.default is REQUIRED:
+                raise CaseError(f"{section}.{name}: missing (required)")
             else:
-                value = copy.deepcopy(default)
-            if check is not None and key in given and not check(value):
-                raise CaseError(f"{section}.{key}: {req} (got {value!r})")
-            out[section][key] = value
+                value = list(key.default) if isinstance(key.default, tuple) else key.default
+            out[section][name] = value
     return out
 
 
@@ -233,7 +184,7 @@ class Case:
     relaxation: float
     ramp_steps: int
     delay_compensation: bool
-    delay_override: int
+    delay_override: int | None  # None: automatic (hil.delay_steps = "auto")
     model: str = "asm"
     definition_path: Path | None = None
 
@@ -267,7 +218,7 @@ class Case:
 
     def delay_steps(self, loop_steps: int) -> int:
         """Delay advance D = loop latency of the master's connections + the rig's latency."""
-        if self.delay_override >= 0:
+        if self.delay_override is not None:
             return self.delay_override
         rig = self.rig.latency_steps(self.dt_s) if self.delay_compensation else 0
         return loop_steps + rig
@@ -295,7 +246,7 @@ def _check_pantograph(v: dict) -> PantographParameters:
         if any(x <= 0 for x in p[key]) if key == "masses_kg" else any(x < 0 for x in p[key]):
             bound = "> 0" if key == "masses_kg" else ">= 0"
             raise CaseError(f"pantograph.{key}: every value must be {bound} (got {p[key]})")
-    uplift = p["uplift_force_N"] if p["uplift_force_N"] >= 0 else mean_force_en50367(v["run"]["speed_kmh"])
+    uplift = mean_force_en50367(v["run"]["speed_kmh"]) if p["uplift_force_N"] == AUTO else p["uplift_force_N"]
     n = len(p["masses_kg"])
     return PantographParameters(tuple(p["masses_kg"]), tuple(p["stiffnesses_N_m"][:n] or [0.0]),
                                 tuple(p["dampings_Ns_m"][:n] or [0.0]), p["contact_stiffness_N_m"],
@@ -365,7 +316,11 @@ def build_case(raw: dict, source: Path) -> Case:
         raise CaseError(f"run.speed_kmh: {run['speed_kmh']:g} km/h is at or above the ASM wave speed "
                         f"sqrt(T/mu) = {cat.wave_speed_m_s * 3.6:.1f} km/h")
     span = c["span_m"]
-    n = max(2, int(round(span / (speed * run["dt_s"]))))
+    samples = span / (speed * run["dt_s"])
+    if samples > MAX_SAMPLES_PER_SPAN:
+        raise CaseError(f"run.dt_s: a span of {span:g} m at {run['speed_kmh']:g} km/h and dt = {run['dt_s']:g} s "
+                        f"holds {samples:.3g} samples, above the limit of {MAX_SAMPLES_PER_SPAN} samples per span")
+    n = max(2, int(round(samples)))
     dt = span / (speed * n)
     nyquist = 0.5 / dt
     if hil["max_frequency_hz"] > nyquist:
@@ -378,7 +333,8 @@ def build_case(raw: dict, source: Path) -> Case:
     if rig.latency_steps(dt) >= n:
         raise CaseError(f"rig.delay_steps: the rig's latency ({rig.latency_steps(dt)} steps) must be shorter "
                         f"than a span ({n} steps)")
-    if hil["delay_steps"] >= n:
+    delay_override = None if hil["delay_steps"] == AUTO else hil["delay_steps"]
+    if delay_override is not None and delay_override >= n:
         raise CaseError(f"hil.delay_steps: {hil['delay_steps']} steps must be shorter than a span ({n} steps)")
     act = v["actuator"]
     if not act["stroke_min_m"] < act["stroke_max_m"]:
@@ -395,7 +351,7 @@ def build_case(raw: dict, source: Path) -> Case:
                             f"frequency pi/dt = {math.pi / dt:.1f} rad/s")
     return Case(v["case"]["name"], source, v, cat, pan, rig, profile, speed, span, n, dt,
                 harmonic_count(hil["max_frequency_hz"], n, dt), hil["update"], hil["relaxation"],
-                hil["ramp_steps"], hil["delay_compensation"], hil["delay_steps"], model, definition)
+                hil["ramp_steps"], hil["delay_compensation"], delay_override, model, definition)
 
 
 def load_case(path: Path | None = None, overrides: list[str] | None = None) -> Case:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 import tempfile
@@ -14,9 +15,42 @@ from datetime import datetime
 from pathlib import Path
 
 from pantohil.models.case import CaseError, load_case
-from pantohil.models.catenary.pfem.operator_file import OperatorFileError
+from pantohil.models.catenary.fe.definition import CatenaryError
+from pantohil.models.catenary.profile import ProfileError
+from pantohil.models.input_files import InputFileError
 
 EXIT_BAD_INPUT = 2
+
+
+MAX_FEM_SPANS = 200  # spans of a fem-sim section
+MAX_WORKERS = 256  # LocalCluster worker processes
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a bad command line in one line (and exit 2), as every other bad input."""
+
+    def error(self, message: str):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+def number(low: float | None = None, high: float | None = None, integer: bool = False, unit: str = ""):
+    """An argparse type: a finite number (an integer if asked) within [low, high]."""
+
+    def parse(text: str):
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'an integer' if integer else 'a number'}, got {text!r}")
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+        if (low is not None and value < low) or (high is not None and value > high):
+            lo = "-inf" if low is None else f"{low:g}"
+            hi = "inf" if high is None else f"{high:g}"
+            raise argparse.ArgumentTypeError(f"{text} is outside [{lo}, {hi}]{' ' + unit if unit else ''}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"
+    return parse
 
 
 def _add_case_args(p: argparse.ArgumentParser, optional: bool) -> None:
@@ -29,9 +63,9 @@ def _add_case_args(p: argparse.ArgumentParser, optional: bool) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="pantohil", description="HIL pantograph tests against a virtual periodic "
+    ap = _Parser(prog="pantohil", description="HIL pantograph tests against a virtual periodic "
                                                                "catenary, built from FMI 2.0 co-simulation units.")
-    sub = ap.add_subparsers(dest="command", required=True)
+    sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="virtual HIL run of a case or of an SSP file written by `pantohil build --ssp`")
     _add_case_args(run, optional=True)
@@ -41,7 +75,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--hardware", metavar="HOST:PORT",
                      help="run against a rig controller (or `pantohil rig-emulator`) through the adapter FMU")
     run.add_argument("--realtime", action="store_true", help="pace the master against the wall clock at dt")
-    run.add_argument("--rt-priority", type=int, default=50, metavar="P",
+    run.add_argument("--rt-priority", type=number(0, 99, integer=True), default=50, metavar="P",
                      help="with --realtime: SCHED_FIFO priority if permitted (0: normal scheduling; default 50)")
     run.add_argument("--live", nargs="?", const="", metavar="HOST:PORT",
                      help="serve the run's channels to Foxglove over WebSocket while it runs (default "
@@ -62,12 +96,12 @@ def _parser() -> argparse.ArgumentParser:
     emu.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
     for name, what in (("loss", "drop an answer"), ("reorder", "send an answer after the next one"),
                        ("duplicate", "send an answer twice"), ("corrupt", "flip a bit of an answer")):
-        emu.add_argument(f"--{name}", type=float, default=0.0, metavar="P", help=f"probability to {what}")
-    emu.add_argument("--delay-us", type=float, default=0.0, help="wait this long before each answer [us]")
-    emu.add_argument("--seed", type=int, default=0, help="seed of the fault injection")
+        emu.add_argument(f"--{name}", type=number(0.0, 1.0), default=0.0, metavar="P", help=f"probability to {what}")
+    emu.add_argument("--delay-us", type=number(0.0, 1e6, unit="us"), default=0.0, help="wait this long before each answer [us]")
+    emu.add_argument("--seed", type=number(0, 2**31 - 1, integer=True), default=0, help="seed of the fault injection")
     emu.add_argument("--stats", type=Path, help="write the emulator's counters to this JSON file")
-    emu.add_argument("--max-seconds", type=float, help="stop after this long (default: until SIGTERM/Ctrl-C)")
-    emu.add_argument("--rt-priority", type=int, default=49, metavar="P",
+    emu.add_argument("--max-seconds", type=number(0.0, 1e7, unit="s"), help="stop after this long (default: until SIGTERM/Ctrl-C)")
+    emu.add_argument("--rt-priority", type=number(0, 99, integer=True), default=49, metavar="P",
                      help="SCHED_FIFO priority if permitted (0: normal scheduling; default 49)")
 
     catenary = sub.add_parser("catenary", help="form-finding, stiffness and ASM fit of a catenary file (FE model)")
@@ -90,8 +124,8 @@ def _parser() -> argparse.ArgumentParser:
     fem = sub.add_parser("fem-sim", help="conventional simulation of a finite section of N spans of the case's catenary "
                                          "(the reference for the periodic models, Paper C sec. 6)")
     _add_case_args(fem, optional=False)
-    fem.add_argument("--spans", type=int, required=True, help="number of spans of the section")
-    fem.add_argument("--central", type=int, default=3, help="central spans whose statistics are reported (default 3)")
+    fem.add_argument("--spans", type=number(1, MAX_FEM_SPANS, integer=True), required=True, help="number of spans of the section")
+    fem.add_argument("--central", type=number(1, MAX_FEM_SPANS, integer=True), default=3, help="central spans whose statistics are reported (default 3)")
     fem.add_argument("--out", type=Path, required=True, help="run folder")
     fem.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -110,10 +144,10 @@ def _parser() -> argparse.ArgumentParser:
                       "(default: the case's)")
     stab.add_argument("--delay", metavar="A:B:N", help="loop delay D [steps], compensated in full "
                       "(default: the case's latency and advance)")
-    stab.add_argument("--relaxation", type=float, help="fix mu_c instead of searching the best one")
+    stab.add_argument("--relaxation", type=number(0.0, 2.0), help="fix mu_c instead of searching the best one")
     stab.add_argument("--out", type=Path, required=True, help="folder for stability.csv, maps and summary.json")
     stab.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: a LocalCluster)")
-    stab.add_argument("--workers", type=int, help="LocalCluster worker processes (default: 2)")
+    stab.add_argument("--workers", type=number(1, MAX_WORKERS, integer=True), help="LocalCluster worker processes (default: 2)")
     stab.add_argument("--quiet", action="store_true", help="no progress bar")
 
     sweep = sub.add_parser("sweep", help="a grid over case keys as independent runs on Dask (resumable; CSV, "
@@ -122,7 +156,7 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument("--out", type=Path, required=True, help="sweep folder (a restart into it skips done points)")
     sweep.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://10.0.0.1:8786 "
                                                               "(default: a LocalCluster)")
-    sweep.add_argument("--workers", type=int, help="LocalCluster worker processes (default: 2)")
+    sweep.add_argument("--workers", type=number(1, MAX_WORKERS, integer=True), help="LocalCluster worker processes (default: 2)")
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
 
     example = sub.add_parser("example", help="reproduce a worked example of the thesis")
@@ -132,9 +166,9 @@ def _parser() -> argparse.ArgumentParser:
 
     direct = sub.add_parser("direct", help="closed-form ASM steady state of a case (Paper A)")
     _add_case_args(direct, optional=True)
-    direct.add_argument("--second-pantograph-at", type=float, metavar="L",
+    direct.add_argument("--second-pantograph-at", type=number(0.0, 10_000.0, unit="m"), metavar="L",
                         help="spacing of a trailing pantograph [m]: its std and the optimal spacings L_min")
-    direct.add_argument("--max-spacing", type=float, default=200.0, help="longest L_min listed [m]")
+    direct.add_argument("--max-spacing", type=number(0.0, 10_000.0, unit="m"), default=200.0, help="longest L_min listed [m]")
     direct.add_argument("--out", type=Path, help="also write the result as JSON to this file")
     return ap
 
@@ -416,13 +450,14 @@ def main(argv: list[str] | None = None) -> int:
                "sweep": _cmd_sweep, "watch": _cmd_watch}[args.command]
     try:
         return handler(args)
-    except CaseError as exc:
-        print(f"pantohil: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except OperatorFileError as exc:
-        print(f"pantohil: error: {exc}", file=sys.stderr)
+    except (CaseError, CatenaryError, ProfileError, InputFileError) as exc:
+        print(f"pantohil: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except Exception as exc:  # an FMU or master failure: one line, the run folder keeps what was written
+        operator_file = sys.modules.get("pantohil.models.catenary.pfem.operator_file")  # not imported: not raised
+        if operator_file is not None and isinstance(exc, operator_file.OperatorFileError):
+            print(f"pantohil: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            return EXIT_BAD_INPUT
         from fmpy.fmi1 import FMICallException
 
         from pantohil.orchestrator.fmu_runtime import FmuError

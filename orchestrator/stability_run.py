@@ -25,6 +25,8 @@ from .hil_run import delay_plan
 from .report import write_json_atomic
 
 COLUMNS = ("update", "f_max_hz", "contact_stiffness_N_m", "delay_steps", "relaxation", "spectral_radius")
+MAX_AXIS_POINTS = 10_000
+MAX_MAP_POINTS = 200_000
 
 
 def parse_range(text: str | None, option: str, integer: bool = False) -> np.ndarray | None:
@@ -34,11 +36,15 @@ def parse_range(text: str | None, option: str, integer: bool = False) -> np.ndar
     parts = text.split(":")
     try:
         if len(parts) == 1:
+            if text.count(",") >= MAX_AXIS_POINTS:
+                raise CaseError(f"{option}: above the limit of {MAX_AXIS_POINTS} points per axis")
             values = np.array([float(v) for v in text.split(",") if v.strip()])
         elif len(parts) in (3, 4):
             a, b, n = float(parts[0]), float(parts[1]), int(parts[2])
             if n < 1:
                 raise CaseError(f"{option}: empty range {text!r} (N must be >= 1)")
+            if n > MAX_AXIS_POINTS:
+                raise CaseError(f"{option}: {n} points, above the limit of {MAX_AXIS_POINTS} points per axis")
             if len(parts) == 4 and parts[3] != "log":
                 raise CaseError(f"{option}: expected A:B:N or A:B:N:log (got {text!r})")
             if len(parts) == 4 and (a <= 0 or b <= 0):
@@ -52,6 +58,8 @@ def parse_range(text: str | None, option: str, integer: bool = False) -> np.ndar
         raise CaseError(f"{option}: expected A:B:N, A:B:N:log, A,B,C or A (got {text!r})") from None
     if len(values) == 0:
         raise CaseError(f"{option}: empty range {text!r}")
+    if not np.all(np.isfinite(values)):
+        raise CaseError(f"{option}: values must be finite numbers (got {text!r})")
     if integer:
         if np.any(values != np.round(values)):
             raise CaseError(f"{option}: delays are whole steps (got {text!r})")
@@ -125,6 +133,9 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
         if np.any(d_values < 1) or np.any(d_values >= case.samples_per_span):
             raise CaseError(f"--delay: must lie in 1..{case.samples_per_span - 1} steps (got {delay})")
         pairs = [(int(d), int(d)) for d in d_values]
+    points = len(pairs) * len(f_values) * len(k_values)
+    if points > MAX_MAP_POINTS:
+        raise CaseError(f"stability map: {points} points, above the limit of {MAX_MAP_POINTS} points")
     tasks = [{"case": str(case.source) if case_path is not None else None, "overrides": list(overrides),
               "update": update, "f_max_hz": float(f), "contact_stiffness_N_m": [float(k) for k in k_values],
               "delay_steps": d, "latency_steps": lat, "relaxation": relaxation}

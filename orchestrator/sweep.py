@@ -29,13 +29,13 @@ import shutil
 import subprocess
 import sys
 import time
-import tomllib
 from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
 from pantohil.models.case import SCHEMA, CaseError, load_case
+from pantohil.models.input_files import InputFileError, load_toml
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
 from .report import write_json_atomic
@@ -45,10 +45,17 @@ DIRECT_KEYS = ("direct.second_pantograph_m",)
 STATS = ("status", "converged", "diverged", "spans", "mean_N", "std_N", "std_20hz_N", "max_N", "min_N",
          "trailing_std_N", "trailing_std_20hz_N", "wall_s", "finished_utc", "message")
 DONE = ("converged", "span_limit", "diverged", "ok")
+MAX_POINTS = 10_000  # points of a sweep, all grid keys together
 
 
 def _fail(path: Path, what: str):
     raise CaseError(f"sweep file {path}: {what}")
+
+
+def _number(path: Path, key: str, what: str, v) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        _fail(path, f"grid key {key!r}: {what} must be a finite number (got {v!r})")
+    return float(v)
 
 
 def _values(path: Path, key: str, spec) -> list:
@@ -57,9 +64,11 @@ def _values(path: Path, key: str, spec) -> list:
         if unknown or not {"start", "stop", "num"} <= set(spec):
             _fail(path, f"grid key {key!r}: a range is {{ start, stop, num [, log] }}")
         num = spec["num"]
-        if not isinstance(num, int) or num < 1:
+        if isinstance(num, bool) or not isinstance(num, int) or num < 1:
             _fail(path, f"grid key {key!r} has an empty range (num = {num!r})")
-        start, stop = float(spec["start"]), float(spec["stop"])
+        if num > MAX_POINTS:
+            _fail(path, f"grid key {key!r}: num = {num} is above the limit of {MAX_POINTS} points")
+        start, stop = _number(path, key, "start", spec["start"]), _number(path, key, "stop", spec["stop"])
         if spec.get("log", False):
             if start <= 0 or stop <= 0:
                 _fail(path, f"grid key {key!r}: a log range needs positive ends")
@@ -68,6 +77,8 @@ def _values(path: Path, key: str, spec) -> list:
     if isinstance(spec, list):
         if not spec:
             _fail(path, f"grid key {key!r} has an empty range ([])")
+        if len(spec) > MAX_POINTS:
+            _fail(path, f"grid key {key!r}: {len(spec)} values, above the limit of {MAX_POINTS} points")
         return list(spec)
     return [spec]
 
@@ -96,15 +107,19 @@ def load_sweep(path: Path) -> dict:
     """Parse and check a sweep file; every point's case is validated before anything runs."""
     path = Path(path)
     try:
-        raw = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise CaseError(f"sweep file {path} does not exist") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise CaseError(f"sweep file {path} is not valid TOML: {exc}") from None
+        raw = load_toml(path, "sweep file")
+    except InputFileError as exc:
+        raise CaseError(str(exc)) from None
     unknown = set(raw) - {"sweep", "set", "grid"}
     if unknown:
         _fail(path, f"unknown section [{sorted(unknown)[0]}] (sections: sweep, set, grid)")
+    for section in ("sweep", "set", "grid"):
+        if not isinstance(raw.get(section, {}), dict):
+            _fail(path, f"[{section}] must be a table (got {raw[section]!r})")
     head = raw.get("sweep", {})
+    for key in ("name", "case", "kind", "plot_x", "description"):
+        if key in head and not isinstance(head[key], str):
+            _fail(path, f"sweep.{key} must be a string (got {head[key]!r})")
     bad = set(head) - {"name", "case", "kind", "plot_x", "description"}
     if bad:
         _fail(path, f"unknown key sweep.{sorted(bad)[0]}")
@@ -123,6 +138,9 @@ def load_sweep(path: Path) -> dict:
     for key in fixed:
         _check_key(path, key, kind, "set")
     values = {key: _values(path, key, spec) for key, spec in grid.items()}
+    total = math.prod(len(v) for v in values.values())
+    if total > MAX_POINTS:
+        _fail(path, f"the grid has {total} points, above the limit of {MAX_POINTS} points")
     plot_x = head.get("plot_x", next(iter(grid)))
     if plot_x not in grid:
         _fail(path, f"sweep.plot_x {plot_x!r} is not a grid key")

@@ -7,10 +7,14 @@ and dropper clamps), whose design heights follow an optional pre-sag parabola.
 from __future__ import annotations
 
 import csv
+import io
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from pantohil.models.input_files import InputFileError, read_input_text
 
 GRAVITY_M_S2 = 9.81
 
@@ -55,18 +59,30 @@ class TabulatedProfile:
         return np.interp(np.mod(np.asarray(x, dtype=float), self.span_m), self.x_m, self.z_m, period=self.span_m)
 
 
+MAX_PROFILE_ROWS = 1_000_000
+
+
 def read_profile_csv(path: Path, span_m: float) -> TabulatedProfile:
-    """Read `x_m,z0_m` rows; x must increase and lie within [0, span]."""
+    """Read `x_m,z0_m` rows; x must increase and lie within [0, span], every value finite."""
     path = Path(path)
     try:
-        with path.open(newline="") as fh:
-            rows = list(csv.DictReader(fh))
+        text = read_input_text(path, "profile file")
+    except InputFileError as exc:
+        raise ProfileError(str(exc)) from None
+    try:
+        rows = list(itertools.islice(csv.DictReader(io.StringIO(text, newline="")), MAX_PROFILE_ROWS + 1))
+        if len(rows) > MAX_PROFILE_ROWS:
+            raise ProfileError(f"profile file {path}: more than the limit of {MAX_PROFILE_ROWS} rows")
         x = np.array([float(r["x_m"]) for r in rows])
         z = np.array([float(r["z0_m"]) for r in rows])
-    except FileNotFoundError:
-        raise ProfileError(f"profile file {path} does not exist") from None
-    except (KeyError, ValueError, TypeError) as exc:
+    except (KeyError, ValueError, TypeError, csv.Error) as exc:
+        if isinstance(exc, ProfileError):
+            raise
         raise ProfileError(f"profile file {path}: expected numeric columns x_m,z0_m ({exc})") from None
+    bad = np.flatnonzero(~(np.isfinite(x) & np.isfinite(z)))
+    if len(bad):
+        raise ProfileError(f"profile file {path}: row {bad[0] + 1} is not finite (x_m {x[bad[0]]!r}, "
+                           f"z0_m {z[bad[0]]!r})")
     if len(x) < 2 or np.any(np.diff(x) <= 0) or x[0] < 0 or x[-1] > span_m:
         raise ProfileError(f"profile file {path}: x_m must increase within [0, {span_m}] m")
     return TabulatedProfile(span_m, x, z)

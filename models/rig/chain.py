@@ -13,7 +13,6 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 
 @dataclass(frozen=True)
@@ -49,6 +48,8 @@ class _DiscreteFilter:
     """A continuous transfer function discretised (bilinear) and run one sample at a time (DF-II T)."""
 
     def __init__(self, num, den, dt_s: float, initial: float):
+        from scipy import signal  # here: scipy.signal takes seconds to import, and validating a case needs none of it
+
         b, a, _ = signal.cont2discrete((num, den), dt_s, method="bilinear")
         b = np.atleast_1d(np.squeeze(b))
         self.b = [float(v) / a[0] for v in b]

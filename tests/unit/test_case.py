@@ -20,7 +20,7 @@ def test_override_parses_toml_values():
 @pytest.mark.parametrize("override,words", [
     ("pantograph.colour=1", ["pantograph.colour", "unknown key"]),
     ("bogus.key=1", ["bogus", "unknown section"]),
-    ("pantograph.masses_kg=[6.6, -5.8, 5.8]", ["pantograph.masses_kg", "> 0"]),
+    ("pantograph.masses_kg=[6.6, -5.8, 5.8]", ["pantograph.masses_kg[1]", "(0, 1000]"]),
     ("run.speed_kmh=530", ["run.speed_kmh", "wave speed"]),
     ("hil.max_frequency_hz=600", ["hil.max_frequency_hz", "Nyquist"]),
     ("rig.delay_steps=936", ["rig.delay_steps", "shorter than a span"]),

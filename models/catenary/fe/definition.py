@@ -8,11 +8,12 @@ span) or by `dropper_positions_m` (from the span's first support). Errors are on
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from pantohil.models.input_files import InputFileError, load_toml
 
 
 class CatenaryError(ValueError):
@@ -87,6 +88,17 @@ _SCHEMA = {
 }
 
 
+# Stated physical ranges of catenary-file keys (upper bounds; lower bounds are given where read).
+UPPER_BOUNDS = {
+    "span_m": 1000.0, "encumbrance_m": 10.0, "presag_m": 10.0, "mesh_size_m": 10.0, "length_m": 1000.0,
+    "tension_N": 1e6, "linear_mass_kg_m": 100.0, "density_kg_m3": 1e5, "area_m2": 0.01, "youngs_modulus_Pa": 1e13,
+    "second_moment_m4": 1e-3, "bending_stiffness_N_m2": 1e6, "clamp_mass_messenger_kg": 100.0,
+    "clamp_mass_contact_kg": 100.0, "mass_kg": 1000.0, "stiffness_N_m": 1e9, "alpha_1_s": 100.0, "beta_s": 1.0,
+}
+MIN_MESH_SIZE_M = 0.05
+MAX_DROPPERS = 100
+
+
 def _num(section: dict, sec: str, key: str, default=None, positive=False, nonneg=False) -> float:
     if key not in section:
         if default is None:
@@ -94,12 +106,25 @@ def _num(section: dict, sec: str, key: str, default=None, positive=False, nonneg
         return default
     v = section[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise CatenaryError(f"{sec}.{key}: expected a number, got {v!r}")
+        raise CatenaryError(f"{sec}.{key}: expected a finite number, got {v!r}")
     if positive and v <= 0:
         raise CatenaryError(f"{sec}.{key}: must be > 0 (got {v!r})")
     if nonneg and v < 0:
         raise CatenaryError(f"{sec}.{key}: must be >= 0 (got {v!r})")
+    high = UPPER_BOUNDS.get(key)
+    if high is not None and abs(v) > high:
+        raise CatenaryError(f"{sec}.{key}: {v:g} is beyond the physical range of a catenary (|value| <= {high:g})")
     return float(v)
+
+
+def _number_list(c: dict, key: str, minimum: int) -> list[float]:
+    values = c[key]
+    if (not isinstance(values, list) or len(values) < minimum
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)):
+        raise CatenaryError(f"catenary.{key}: expected a list of at least {minimum} finite numbers [m]")
+    if len(values) > MAX_DROPPERS + 1:
+        raise CatenaryError(f"catenary.{key}: {len(values)} values, above the limit of {MAX_DROPPERS} droppers")
+    return [float(v) for v in values]
 
 
 def _wire(raw: dict, sec: str) -> Wire:
@@ -142,19 +167,14 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
     if "dropper_positions_m" in c and "dropper_spacing_m" in c:
         raise CatenaryError("catenary.dropper_positions_m: give either dropper_positions_m or dropper_spacing_m")
     if "dropper_spacing_m" in c:
-        spacing = c["dropper_spacing_m"]
-        if not isinstance(spacing, list) or len(spacing) < 2 or not all(isinstance(v, (int, float)) for v in spacing):
-            raise CatenaryError("catenary.dropper_spacing_m: expected a list of at least two intervals [m]")
+        spacing = _number_list(c, "dropper_spacing_m", 2)
         if any(v <= 0 for v in spacing):
             raise CatenaryError("catenary.dropper_spacing_m: overlapping droppers (an interval <= 0)")
         if abs(sum(spacing) - span) > 1e-6 * span:
             raise CatenaryError(f"catenary.dropper_spacing_m: intervals sum to {sum(spacing):g} m, not the span {span:g} m")
         positions = tuple(float(v) for v in np.cumsum(spacing)[:-1])
     elif "dropper_positions_m" in c:
-        pos = c["dropper_positions_m"]
-        if not isinstance(pos, list) or not pos or not all(isinstance(v, (int, float)) for v in pos):
-            raise CatenaryError("catenary.dropper_positions_m: expected a list of positions [m]")
-        positions = tuple(float(v) for v in pos)
+        positions = tuple(_number_list(c, "dropper_positions_m", 1))
         if any(p <= 0 or p >= span for p in positions):
             raise CatenaryError(f"catenary.dropper_positions_m: a dropper outside the span (0, {span:g}) m")
         if any(b <= a for a, b in zip(positions, positions[1:])):
@@ -180,6 +200,8 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
         raise CatenaryError(f"messenger_support.type: must be \"fixed\" or \"spring\" (got {support_type!r})")
     k_support = _num(ms, "messenger_support", "stiffness_N_m", positive=True) if support_type == "spring" else 0.0
     mesh = _num(c, "catenary", "mesh_size_m", 0.25, positive=True)
+    if mesh < MIN_MESH_SIZE_M:
+        raise CatenaryError(f"catenary.mesh_size_m: {mesh:g} m is below the limit of {MIN_MESH_SIZE_M:g} m")
     if mesh > min(np.diff((0.0, *positions, span))):
         raise CatenaryError(f"catenary.mesh_size_m: {mesh:g} m is longer than the shortest dropper interval")
     return CatenaryDefinition(
@@ -201,9 +223,7 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
 def load_definition(path: Path) -> CatenaryDefinition:
     path = Path(path)
     try:
-        raw = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise CatenaryError(f"catenary file {path} does not exist") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise CatenaryError(f"catenary file {path} is not valid TOML: {exc}") from None
+        raw = load_toml(path, "catenary file")
+    except InputFileError as exc:
+        raise CatenaryError(str(exc)) from None
     return build_definition(raw, path)

@@ -1,0 +1,262 @@
+"""One declaration per case parameter: a frozen dataclass per case section.
+
+Each field's metadata (`Param`) carries the unit, the range, the description, the FMI type and the FMU
+that receives it. The case schema and its validation (`models/case.py`), the FMU variable tables
+(`fmus/`), the builder's mapping (`builder/build_fmus.py`) and the key reference
+(`docs/case-reference.md`) are derived from these declarations.
+
+Naming rule (case keys, FMU variables and summary fields): a parameter has one name, `snake_case`,
+ending in its SI unit (`_m`, `_s`, `_N`, `_N_m`, `_kg_m`, `_hz`, `_1_s`, ...; none for a pure number
+or a choice), and it is the same in the case file (`[rig] servo_bandwidth_hz`), in the FMU's
+modelDescription.xml (`servo_bandwidth_hz`) and in summary.json. Speed is the one key given in km/h
+(`run.speed_kmh`), as railway engineers state it.
+
+A value written `"auto"` is computed by pantohil (it is the default where it is allowed); no number
+stands for "automatic".
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+AUTO = "auto"
+REQUIRED = object()  # a field without a default: the case must give it
+
+XS_INT_MIN = -(2**31)  # FMI 2.0 Integer is xs:int
+XS_INT_MAX = 2**31 - 1
+
+# Limits on sizes, named in the messages that refuse them (checked before anything is allocated).
+MAX_SAMPLES_PER_SPAN = 100_000
+MAX_SPANS = 10_000
+MAX_LIST_LENGTH = 100
+
+
+@dataclass(frozen=True)
+class Param:
+    """What a case key is: unit (FMI unit string, "1" for none), description and range."""
+
+    unit: str
+    description: str
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    choices: tuple = ()
+    fmu: str | None = None  # the FMU whose variable of the same name receives the value
+    auto: bool = False  # "auto" (computed by pantohil) is allowed, and is the default
+
+    def range_text(self) -> str:
+        """The range as a mathematician writes it, e.g. `(0, 1e+06]`."""
+        if self.choices:
+            return " | ".join(json_like(c) for c in self.choices)
+        if self.low is None and self.high is None:
+            return "any"
+        lo = "-inf" if self.low is None else f"{self.low:g}"
+        hi = "inf" if self.high is None else f"{self.high:g}"
+        return f"{'(' if self.low_open or self.low is None else '['}{lo}, {hi}{')' if self.high_open or self.high is None else ']'}"
+
+    def contains(self, x: float) -> bool:
+        if self.low is not None and (x <= self.low if self.low_open else x < self.low):
+            return False
+        return not (self.high is not None and (x >= self.high if self.high_open else x > self.high))
+
+
+def json_like(value) -> str:
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def param(default, unit: str, description: str, low=None, high=None, *, low_open=False, high_open=False,
+          choices=(), fmu=None, auto=False):
+    """A dataclass field declaring one case key."""
+    meta = Param(unit, description, low, high, low_open, high_open, tuple(choices), fmu, auto)
+    if isinstance(default, (list, tuple)):
+        return field(default=tuple(default), metadata={"param": meta})
+    return field(default=default, metadata={"param": meta})
+
+
+@dataclass(frozen=True)
+class CaseSection:
+    """[case]: what the case is."""
+
+    name: str = param("unnamed", "1", "case name (the default run folder's name)")
+    description: str = param("", "1", "free text")
+
+
+@dataclass(frozen=True)
+class CatenarySection:
+    """[catenary]: the periodic catenary model (Paper A sec. 3, Paper C)."""
+
+    model: str = param("asm", "1", "catenary model: ASM2 string (Paper A) or PFEM (Paper C)",
+                       choices=("asm", "pfem"), fmu="catenary")
+    definition_file: str = param("", "1", "catenary file (relative to the case): ASM2 fitted to its FE model, "
+                                          "or the span of the PFEM")
+    span_m: float = param(REQUIRED, "m", "span length L", 1.0, 1000.0, fmu="catenary")
+    tension_N: float = param(REQUIRED, "N", "contact-wire tension T", 0.0, 1e6, low_open=True, fmu="catenary")
+    density_kg_m: float = param(REQUIRED, "kg/m", "string linear density mu", 0.0, 100.0, low_open=True,
+                                fmu="catenary")
+    support_stiffness_N_m2: float = param(REQUIRED, "N/m2", "visco-elastic support stiffness kbar", 0.0, 1e6,
+                                          low_open=True, fmu="catenary")
+    alpha_1_s: float = param(0.0125, "1/s", "Rayleigh alpha", 0.0, 100.0, fmu="catenary")
+    beta_s: float = param(1e-4, "s", "Rayleigh beta", 0.0, 1.0, fmu="catenary")
+
+
+@dataclass(frozen=True)
+class ProfileSection:
+    """[profile]: the static contact-wire height z0 along a span (Paper A sec. 5.1)."""
+
+    source: str = param("droppers", "1", "where z0 comes from", choices=("droppers", "csv", "catenary"))
+    catenary_file: str = param("", "1", "catenary file whose form-found z0 to use, relative to the case")
+    dropper_spacing_m: tuple = param((), "m", "intervals support-dropper-...-support", 0.0, 1000.0, low_open=True)
+    wire_mass_kg_m: float = param(1.374, "kg/m", "contact-wire mass per length", 0.0, 100.0, low_open=True)
+    wire_tension_N: float = param(0.0, "N", "tension for the sag (0: catenary.tension_N)", 0.0, 1e6)
+    presag_m: float = param(0.0, "m", "mid-span pre-sag", -10.0, 10.0)
+    csv_file: str = param("", "1", "x_m,z0_m file, relative to the case file")
+
+
+@dataclass(frozen=True)
+class PantographSection:
+    """[pantograph]: the lumped pantograph (Paper A sec. 2, Table A.3)."""
+
+    model: str = param("chain", "1", "pantograph model", choices=("chain", "rigid_mass"), fmu="pantograph")
+    masses_kg: tuple = param((6.6, 5.8, 5.8), "kg", "masses, head first", 0.0, 1000.0, low_open=True)
+    stiffnesses_N_m: tuple = param((7000.0, 14100.0, 80.0), "N/m", "element stiffnesses", 0.0, 1e8)
+    dampings_Ns_m: tuple = param((0.0, 0.0, 70.0), "N.s/m", "element dampings", 0.0, 1e6)
+    contact_stiffness_N_m: float = param(50000.0, "N/m", "penalty contact stiffness k_c", 0.0, 1e8,
+                                         low_open=True, fmu="pantograph")
+    uplift_force_N: float = param(AUTO, "N", "static uplift force; \"auto\": F_m = 0.00097 v^2 + 70 (EN 50367, "
+                                             "Paper A eq. 37)", 0.0, 2000.0, low_open=True, fmu="pantograph",
+                                  auto=True)
+    gravity_m_s2: float = param(0.0, "m/s2", "gravity felt by a rigid mass (load cell not tared)", 0.0, 100.0,
+                                fmu="pantograph")
+
+
+@dataclass(frozen=True)
+class RigSection:
+    """[rig]: the simulated rig between model and pantograph (Paper B sec. 4, Paper D sec. 2)."""
+
+    delay_steps: int = param(0, "1", "pure delay of the height path [steps]", 0, 100_000, fmu="rig")
+    comm_decimation: int = param(1, "1", "N_com: one height of every N_com reaches the drive", 1, 10_000,
+                                 fmu="rig")
+    servo_bandwidth_hz: float = param(0.0, "Hz", "servo natural frequency (0: ideal tracking)", 0.0, 1e5, fmu="rig")
+    servo_damping: float = param(0.7, "1", "servo damping ratio", 0.0, 100.0, low_open=True, fmu="rig")
+    loadcell_cutoff_hz: float = param(0.0, "Hz", "load-cell low-pass cut-off (0: none)", 0.0, 1e5, fmu="rig")
+    force_offset_N: float = param(0.0, "N", "force added to the measurement", -1e4, 1e4, fmu="rig")
+    noise_std_N: float = param(0.0, "N", "measurement noise standard deviation", 0.0, 1e4, fmu="rig")
+    noise_seed: int = param(0, "1", "seed of the measurement noise", 0, XS_INT_MAX, fmu="rig")
+
+
+@dataclass(frozen=True)
+class LinkSection:
+    """[link]: the UDP link to a rig controller (docs/udp-protocol.md)."""
+
+    receive_timeout_s: float = param(0.0003, "s", "how long a step waits for the awaited answer", 1e-6, 1.0,
+                                     fmu="adapter")
+    pipeline_steps: int = param(1, "1", "1: use the answer to the previous command (no waiting on the network)",
+                                choices=(0, 1), fmu="adapter")
+    tolerated_losses: int = param(50, "1", "consecutive missing answers before a fault", 0, 1_000_000,
+                                  fmu="adapter")
+    local_port: int = param(0, "1", "local UDP port (0: any free port)", 0, 65535, fmu="adapter")
+
+
+@dataclass(frozen=True)
+class ActuatorSection:
+    """[actuator]: the limits the adapter keeps every command within (LinMot PS10-70x240U)."""
+
+    stroke_min_m: float = param(-0.12, "m", "lowest actuator position", -10.0, 10.0, fmu="adapter")
+    stroke_max_m: float = param(0.12, "m", "highest actuator position", -10.0, 10.0, fmu="adapter")
+    max_velocity_m_s: float = param(5.4, "m/s", "velocity limit", 0.0, 100.0, low_open=True, fmu="adapter")
+    max_acceleration_m_s2: float = param(300.0, "m/s2", "acceleration limit (force limit / moving mass)",
+                                         0.0, 1e5, low_open=True, fmu="adapter")
+
+
+@dataclass(frozen=True)
+class HilSection:
+    """[hil]: the periodic HIL update (Paper B sec. 3, Paper D sec. 3)."""
+
+    update: str = param("step", "1", "update strategy: step-by-step (Paper D eq. 2) or span-by-span (eq. 3)",
+                        choices=("step", "span"), fmu="catenary")
+    relaxation: float = param(0.1, "1", "relaxation mu_c (Paper D eq. 10)", 0.0, 1.0, low_open=True, fmu="catenary")
+    max_frequency_hz: float = param(25.0, "Hz", "f_max of the frequency reduction", 0.0, 1e4, low_open=True,
+                                    fmu="catenary")
+    ramp_steps: int = param(0, "1", "initial ramp N_r [steps]", 0, 100_000_000, fmu="catenary")
+    delay_compensation: bool = param(True, "1", "advance the height by the rig's latency")
+    delay_steps: int = param(AUTO, "1", "delay advance D [steps]; \"auto\": the loop latency of the master plus "
+                                        "the rig's (Paper D sec. 3.4)", 0, 100_000, fmu="catenary", auto=True)
+
+
+@dataclass(frozen=True)
+class PfemSection:
+    """[pfem]: the PFEM catenary's discretisation and dropper slackening (Paper C sec. 3-5)."""
+
+    droppers: bool = param(True, "1", "dropper slackening (Paper C sec. 5); false: the linear catenary",
+                           fmu="catenary")
+    dropper_max_frequency_hz: float = param(20.0, "Hz", "f_max of the elongations, N_hd", 0.0, 1e4, low_open=True)
+    dropper_relaxation: float = param(1.0, "1", "relaxation of the dropper corrections mu_d (Paper D sec. 3.7)",
+                                      0.0, 1.0, low_open=True, fmu="catenary")
+    omega_max_rad_s: float = param(750.0, "rad/s", "highest frequency of the transform", 0.0, 1e5, low_open=True)
+    grid_resolution: float = param(0.094, "1", "frequency step / (alpha + beta w^2)", 1e-3, 10.0)
+    taper: float = param(0.25, "1", "tapered top fraction of [0, w_max]", 0.0, 1.0, high_open=True)
+
+
+@dataclass(frozen=True)
+class RunSection:
+    """[run]: speed, time step and when a run stops."""
+
+    speed_kmh: float = param(REQUIRED, "km/h", "pantograph speed", 1.0, 600.0)
+    dt_s: float = param(0.001, "s", "target time step; adjusted to fit the span", 1e-5, 0.1)
+    max_spans: int = param(200, "1", "span limit", 1, MAX_SPANS)
+    convergence_tol: float = param(1e-4, "1", "rms span-to-span change / std", 0.0, 1.0, low_open=True)
+    force_limit_N: float = param(2000.0, "N", "|force| beyond this is divergence", 0.0, 1e6, low_open=True)
+    height_limit_m: float = param(1.0, "m", "|height| beyond this is divergence", 0.0, 100.0, low_open=True)
+    divergence_change: float = param(0.8, "1", "median span-to-span change / std beyond which the iteration "
+                                               "has diverged (a limit cycle with contact loss)", 0.0, 100.0,
+                                     low_open=True)
+    divergence_spans: int = param(10, "1", "spans over which that median is taken", 1, MAX_SPANS)
+
+
+SECTIONS: dict[str, type] = {
+    "case": CaseSection, "catenary": CatenarySection, "profile": ProfileSection, "pantograph": PantographSection,
+    "rig": RigSection, "link": LinkSection, "actuator": ActuatorSection, "hil": HilSection, "pfem": PfemSection,
+    "run": RunSection,
+}
+
+
+@dataclass(frozen=True)
+class Key:
+    """One declared case key: section, name, Python type, default and its Param."""
+
+    section: str
+    name: str
+    type: type
+    default: object
+    param: Param
+
+    @property
+    def dotted(self) -> str:
+        return f"{self.section}.{self.name}"
+
+
+def section_keys(section: str) -> dict[str, Key]:
+    """The declared keys of a section, in declaration order."""
+    cls = SECTIONS[section]
+    hints = {"str": str, "float": float, "int": int, "bool": bool, "tuple": tuple}
+    return {f.name: Key(section, f.name, hints[f.type] if isinstance(f.type, str) else f.type, f.default,
+                        f.metadata["param"]) for f in dataclasses.fields(cls)}
+
+
+def all_keys() -> list[Key]:
+    return [k for s in SECTIONS for k in section_keys(s).values()]
+
+
+def fmu_keys(fmu: str) -> list[Key]:
+    """The case keys that reach an FMU, as variables of the same name."""
+    return [k for k in all_keys() if k.param.fmu == fmu]
+
+
+def is_finite_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
