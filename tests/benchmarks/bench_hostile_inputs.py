@@ -1,4 +1,4 @@
-"""Time and memory of each hostile-input refusal (tests/test_hostile_inputs.py): every case runs as
+"""Time and memory of each hostile-input refusal (tests/system/test_hostile_inputs.py): every case runs as
 `pantohil ...` in a child process limited to 1 GB of address space; prints the median and the largest
 wall time and the peak resident set size of the children, and the slowest cases.
 
@@ -14,7 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "system"))
 from test_hostile_inputs import CASES, _limit_memory, prepare  # noqa: E402
 
 

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_CASE = ROOT / "models" / "cases" / "asm_250.toml"
-CATENARY = ROOT / "models" / "catenaries" / "benchmark_simple.toml"
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_CASE = ROOT / "models" / "data" / "cases" / "asm_250.toml"
+CATENARY = ROOT / "models" / "data" / "catenaries" / "benchmark_simple.toml"
 MEMORY_LIMIT_BYTES = 1 << 30
 
 
