@@ -40,12 +40,14 @@ def cache_root() -> Path:
     return Path(os.environ.get("PANTOHIL_CACHE", Path.home() / ".cache" / "pantohil"))
 
 
-def fmu_parameters(case: Case, delay_steps: int, rig_address: tuple[str, int] = ("127.0.0.1", 47800)) -> dict[str, dict]:
+def fmu_parameters(case: Case, delay_steps: int,
+                   rig_address: tuple[str, int] = ("127.0.0.1", 47800)) -> dict[str, dict]:
     """The case as FMU parameter values, by FMU."""
     cat, pan, rig = case.catenary, case.pantograph, case.rig
     link, act = case.values["link"], case.values["actuator"]
     n = pan.n
-    pad = lambda xs: list(xs) + [0.0] * (3 - len(xs))
+    def pad(xs):
+        return list(xs) + [0.0] * (3 - len(xs))
     masses, stiff, damp = pad(pan.masses_kg), pad(pan.stiffnesses_N_m), pad(pan.dampings_Ns_m)
     return {
         "catenary": {

@@ -33,7 +33,9 @@ def _q(ns: str, tag: str) -> str:
 
 
 def _variables(fmu: Path):
-    return [v for v in read_model_description(str(fmu)).modelVariables if v.causality in ("parameter", "input", "output")]
+    return [
+        v for v in read_model_description(str(fmu)).modelVariables if v.causality in ("parameter", "input", "output")
+    ]
 
 
 def _fmt(kind: str, value) -> str:
@@ -82,7 +84,8 @@ def system_structure(name: str, fmus: dict[str, Path], parameters: dict[str, dic
             p = ET.SubElement(params, _q(SSV, "Parameter"), {"name": f"{comp}.{var}"})
             ET.SubElement(p, _q(SSV, kinds[var]), {"value": _fmt(kinds[var], value)})
     ET.indent(pset)
-    decl = lambda el: ET.tostring(el, encoding="UTF-8", xml_declaration=True)
+    def decl(el):
+        return ET.tostring(el, encoding="UTF-8", xml_declaration=True)
     return decl(root), decl(pset)
 
 
@@ -163,7 +166,11 @@ def read_ssp(path: Path, into: Path) -> dict:
         for pset in binding.parameterValues:
             for p in pset.parameters:
                 comp, var = p.name.split(".", 1)
-                value = float(p.value) if p.type == "Real" else (p.value in (True, "true") if p.type == "Boolean" else int(p.value))
+                value = (
+                    float(p.value)
+                    if p.type == "Real"
+                    else (p.value in (True, "true") if p.type == "Boolean" else int(p.value))
+                )
                 parameters.setdefault(comp, {})[var] = value
     return {"fmus": fmus, "connections": connections, "parameters": parameters, "case_file": case_file}
 

@@ -5,8 +5,8 @@ it. With pipeline_steps = 1 (the default) it then takes the rig's answer to the 
 command, which had a whole period to arrive, so the step never waits on the network: one step of
 latency, compensated by the catenary's delay advance. With 0 it waits for the answer to this step.
 An answer that does not come within the receive timeout makes the force NaN ("not measured": the
-catenary keeps that sample's previous value). After more consecutive misses than tolerated the link is in fault: the adapter keeps sending
-the last safe position and the master stops the run.
+catenary keeps that sample's previous value). After more consecutive misses than tolerated the link is
+in fault: the adapter keeps sending the last safe position and the master stops the run.
 """
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from collections import OrderedDict
 from pantohil.fmus import udp_protocol as proto
 from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
 from pantohil.models.rig.actuator import ActuatorLimits, Limiter
+import contextlib
 
 LINK_OK, LINK_DEGRADED, LINK_FAULT = 0, 1, 2
 _WINDOW = 4096  # how many recent sequence numbers are remembered for late/duplicate detection
@@ -27,15 +28,43 @@ VARIABLES = [
     Var("rig_port", "integer", "parameter", "1", "UDP port of the rig controller", 47800, 1, 65535),
     Var("local_port", "integer", "parameter", "1", "Local UDP port (0: any free port)", 0, 0, 65535),
     Var("receive_timeout", "real", "parameter", "s", "How long a step waits for the awaited answer", 0.0003, 1e-6, 1.0),
-    Var("pipeline_steps", "integer", "parameter", "1", "1: use the answer to the previous command (one step of latency, no waiting on the network); 0: wait for this step's answer", 1, 0, 1),
-    Var("tolerated_losses", "integer", "parameter", "1", "Consecutive missing answers before the link is in fault", 50, 0),
+    Var(
+        "pipeline_steps",
+        "integer",
+        "parameter",
+        "1",
+        "1: use the answer to the previous command (one step of latency, no waiting on the network); "
+        "0: wait for this step's answer",
+        1,
+        0,
+        1,
+    ),
+    Var(
+        "tolerated_losses",
+        "integer",
+        "parameter",
+        "1",
+        "Consecutive missing answers before the link is in fault",
+        50,
+        0,
+    ),
     Var("stroke_min", "real", "parameter", "m", "Lowest actuator position", -0.12),
     Var("stroke_max", "real", "parameter", "m", "Highest actuator position", 0.12),
     Var("max_velocity", "real", "parameter", "m/s", "Actuator velocity limit (LinMot PS10-70x240U: 5.4 m/s)", 5.4, 0.0),
-    Var("max_acceleration", "real", "parameter", "m/s2", "Actuator acceleration limit (force limit / moving mass)", 300.0, 0.0),
+    Var(
+        "max_acceleration",
+        "real",
+        "parameter",
+        "m/s2",
+        "Actuator acceleration limit (force limit / moving mass)",
+        300.0,
+        0.0,
+    ),
     Var("time_step", "real", "parameter", "s", "Sampling time dt", 0.001, 1e-6),
     Var("height_command", "real", "input", "m", "Height commanded by the catenary model", 0.0),
-    Var("measured_force", "real", "output", "N", "Force measured by the rig for this step; NaN when no answer came", 0.0),
+    Var(
+        "measured_force", "real", "output", "N", "Force measured by the rig for this step; NaN when no answer came", 0.0
+    ),
     Var("actuator_height", "real", "output", "m", "Actuator height reported by the rig", 0.0),
     Var("command_sent", "real", "output", "m", "Height sent to the rig, within the actuator limits", 0.0),
     Var("link_state", "integer", "output", "1", "0 ok, 1 answers missing, 2 fault (beyond tolerated losses)", 0),
@@ -100,7 +129,7 @@ class PantohilAdapter(PantohilSlave):
             self._sock.settimeout(remaining)
             try:
                 data, _ = self._sock.recvfrom(2048)
-            except (socket.timeout, BlockingIOError):
+            except (TimeoutError, BlockingIOError):
                 return None
             except OSError:  # e.g. ICMP port unreachable reported on the socket
                 continue
@@ -181,9 +210,7 @@ class PantohilAdapter(PantohilSlave):
 
     def terminate(self):
         if self._sock is not None:
-            try:
+            with contextlib.suppress(OSError):
                 self._sock.sendto(proto.encode(proto.Message(proto.BYE, self._seq + 1, 0)), self._peer)
-            except OSError:
-                pass
             self._sock.close()
             self._sock = None

@@ -22,7 +22,16 @@ MAX_DROPPERS = 12
 VARIABLES = [
     Var("span_length", "real", "parameter", "m", "Span length L", 65.0, 1.0, 1000.0),
     Var("speed", "real", "parameter", "m/s", "Pantograph speed V", 69.44444444444444, 0.0, 200.0),
-    Var("time_step", "real", "parameter", "s", "Sampling time dt; a span holds samples_per_span samples", 0.001, 1e-5, 0.1),
+    Var(
+        "time_step",
+        "real",
+        "parameter",
+        "s",
+        "Sampling time dt; a span holds samples_per_span samples",
+        0.001,
+        1e-5,
+        0.1,
+    ),
     Var("samples_per_span", "integer", "parameter", "1", "Samples per span N = L / (V dt)", 936, 2),
     Var("tension", "real", "parameter", "N", "String tension T", 31500.0, 0.0),
     Var("density", "real", "parameter", "kg/m", "String linear density mu", 1.4735, 0.0),
@@ -30,25 +39,84 @@ VARIABLES = [
     Var("alpha", "real", "parameter", "1/s", "Rayleigh (Kelvin-Voigt) alpha", 0.0125, 0.0),
     Var("beta", "real", "parameter", "s", "Rayleigh (Kelvin-Voigt) beta", 1e-4, 0.0),
     Var("max_frequency", "real", "parameter", "Hz", "Highest harmonic kept in the height f_max", 25.0, 0.0),
-    Var("update_strategy", "integer", "parameter", "1", "0: step-by-step (Paper D eq. 2), 1: span-by-span (eq. 3)", 0, 0, 1),
+    Var(
+        "update_strategy",
+        "integer",
+        "parameter",
+        "1",
+        "0: step-by-step (Paper D eq. 2), 1: span-by-span (eq. 3)",
+        0,
+        0,
+        1,
+    ),
     Var("relaxation", "real", "parameter", "1", "Relaxation mu_c (Paper D eq. 10)", 0.1, 0.0, 1.0),
     Var("ramp_steps", "integer", "parameter", "1", "Initial ramp N_r in steps (0: none)", 0, 0),
     Var("delay_steps", "integer", "parameter", "1", "Delay advance D in steps: the loop latency to compensate", 1, 0),
-    Var("catenary_model", "integer", "parameter", "1", "0: ASM2 (Papers A-B), 1: PFEM from resources/operators.npz (Papers C-D)", 0, 0, 1),
-    Var("droppers", "integer", "parameter", "1", "PFEM: 1 dropper slackening (Paper C sec. 5), 0 linear catenary", 1, 0, 1),
-    Var("dropper_relaxation", "real", "parameter", "1", "PFEM: relaxation of the dropper corrections mu_d (Paper D sec. 3.7)", 1.0, 0.0, 1.0),
-    Var("contact_force", "real", "input", "N", "Measured contact force (pushing the wire up is positive); NaN: not measured", 0.0),
+    Var(
+        "catenary_model",
+        "integer",
+        "parameter",
+        "1",
+        "0: ASM2 (Papers A-B), 1: PFEM from resources/operators.npz (Papers C-D)",
+        0,
+        0,
+        1,
+    ),
+    Var(
+        "droppers",
+        "integer",
+        "parameter",
+        "1",
+        "PFEM: 1 dropper slackening (Paper C sec. 5), 0 linear catenary",
+        1,
+        0,
+        1,
+    ),
+    Var(
+        "dropper_relaxation",
+        "real",
+        "parameter",
+        "1",
+        "PFEM: relaxation of the dropper corrections mu_d (Paper D sec. 3.7)",
+        1.0,
+        0.0,
+        1.0,
+    ),
+    Var(
+        "contact_force",
+        "real",
+        "input",
+        "N",
+        "Measured contact force (pushing the wire up is positive); NaN: not measured",
+        0.0,
+    ),
     Var("height_command", "real", "output", "m", "Contact-point height commanded D samples ahead", 0.0),
     Var("sample_index", "integer", "output", "1", "Label n of the force just received, 0..N-1 in the span", 0),
     Var("span_index", "integer", "output", "1", "Virtual span (block) of the force just received", 0),
     Var("height_at_sample", "real", "output", "m", "Converging wire height at sample_index", 0.0),
     Var("profile_at_sample", "real", "output", "m", "Static wire height z0 (unfiltered) at sample_index", 0.0),
-    Var("force_at_sample", "real", "output", "N", "Force in use at sample_index: the measured one, or the previous span's if it was not measured (NaN input)", 0.0),
+    Var(
+        "force_at_sample",
+        "real",
+        "output",
+        "N",
+        "Force in use at sample_index: the measured one, or the previous span's if it was not measured (NaN input)",
+        0.0,
+    ),
     Var("harmonics", "integer", "output", "1", "Harmonics kept N_h (0..N_h-1)", 0),
     Var("slack_droppers", "integer", "output", "1", "PFEM: droppers corrected at this step (slack)", 0),
-    *[Var(f"dropper_correction_{d + 1}", "real", "output", "N",
-          f"PFEM: correction force of dropper {d + 1} at this step's instant of its window (Paper C eq. 39); 0 if absent", 0.0)
-      for d in range(MAX_DROPPERS)],
+    *[
+        Var(
+            f"dropper_correction_{d + 1}",
+            "real",
+            "output",
+            "N",
+            f"PFEM: correction force of dropper {d + 1} at this step's instant of its window (Paper C eq. 39); "
+            "0 if absent",
+            0.0,
+        )
+        for d in range(MAX_DROPPERS)
+    ],
 ]
 
 
@@ -78,10 +146,14 @@ class PantohilCatenary(PantohilSlave):
             ops = load_operators(Path(self.resources) / OPERATOR_FILE)
             s = ops.settings
             if s.samples_per_span != n or abs(s.dt_s - self.time_step) > 1e-12 or s.n_harmonics != self.harmonics:
-                raise ValueError(f"{OPERATOR_FILE} was built for N = {s.samples_per_span}, dt = {s.dt_s}, N_h = "
-                                 f"{s.n_harmonics}; the parameters give N = {n}, dt = {self.time_step}, N_h = {self.harmonics}")
+                raise ValueError(
+                    f"{OPERATOR_FILE} was built for N = {s.samples_per_span}, dt = {s.dt_s}, N_h = "
+                    f"{s.n_harmonics}; the parameters give N = {n}, dt = {self.time_step}, N_h = {self.harmonics}"
+                )
             if ops.n_droppers > MAX_DROPPERS:
-                raise ValueError(f"the PFEM block has {ops.n_droppers} droppers; this FMU reports at most {MAX_DROPPERS}")
+                raise ValueError(
+                    f"the PFEM block has {ops.n_droppers} droppers; this FMU reports at most {MAX_DROPPERS}"
+                )
             self._z0 = ops.z0
             self._hil = PfemHil(ops, settings, self.dropper_relaxation, bool(self.droppers))
         else:

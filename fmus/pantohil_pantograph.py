@@ -6,16 +6,47 @@ from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
 from pantohil.models.pantograph.lumped import PantographParameters, make_pantograph
 
 VARIABLES = [
-    Var("pantograph_model", "integer", "parameter", "1", "0: mass chain with penalty contact, 1: rigid mass on the actuator", 0, 0, 1),
+    Var(
+        "pantograph_model",
+        "integer",
+        "parameter",
+        "1",
+        "0: mass chain with penalty contact, 1: rigid mass on the actuator",
+        0,
+        0,
+        1,
+    ),
     Var("n_masses", "integer", "parameter", "1", "Masses in the chain, head first", 3, 1, 3),
-    *[Var(f"mass_{i}", "real", "parameter", "kg", f"Mass {i}", m, 0.0) for i, m in zip((1, 2, 3), (6.6, 5.8, 5.8))],
-    *[Var(f"stiffness_{i}", "real", "parameter", "N/m", f"Element {i} stiffness (mass {i} to mass {i + 1} or ground)", k, 0.0)
-      for i, k in zip((1, 2, 3), (7000.0, 14100.0, 80.0))],
-    *[Var(f"damping_{i}", "real", "parameter", "N.s/m", f"Element {i} damping", c, 0.0)
-      for i, c in zip((1, 2, 3), (0.0, 0.0, 70.0))],
+    *[
+        Var(f"mass_{i}", "real", "parameter", "kg", f"Mass {i}", m, 0.0)
+        for i, m in zip((1, 2, 3), (6.6, 5.8, 5.8), strict=False)
+    ],
+    *[
+        Var(
+            f"stiffness_{i}",
+            "real",
+            "parameter",
+            "N/m",
+            f"Element {i} stiffness (mass {i} to mass {i + 1} or ground)",
+            k,
+            0.0,
+        )
+        for i, k in zip((1, 2, 3), (7000.0, 14100.0, 80.0), strict=False)
+    ],
+    *[
+        Var(f"damping_{i}", "real", "parameter", "N.s/m", f"Element {i} damping", c, 0.0)
+        for i, c in zip((1, 2, 3), (0.0, 0.0, 70.0), strict=False)
+    ],
     Var("contact_stiffness", "real", "parameter", "N/m", "Penalty contact stiffness k_c", 50000.0, 0.0),
     Var("uplift_force", "real", "parameter", "N", "Static uplift force on the last mass", 130.0),
-    Var("reference_height", "real", "parameter", "m", "Wire height at which the static contact force equals the uplift force", 0.0),
+    Var(
+        "reference_height",
+        "real",
+        "parameter",
+        "m",
+        "Wire height at which the static contact force equals the uplift force",
+        0.0,
+    ),
     Var("gravity", "real", "parameter", "m/s2", "Gravity felt by the rigid mass (load cell not tared)", 0.0, 0.0),
     Var("time_step", "real", "parameter", "s", "Integration step dt (equal to the communication step)", 0.001, 1e-6),
     Var("height", "real", "input", "m", "Actuator (contact-point) height at the end of the step", 0.0),
@@ -36,9 +67,17 @@ class PantohilPantograph(PantohilSlave):
 
     def exit_initialization_mode(self):
         n = int(self.n_masses) if self.pantograph_model == 0 else 1
-        pick = lambda stem: tuple(float(getattr(self, f"{stem}_{i}")) for i in range(1, n + 1))
-        params = PantographParameters(pick("mass"), pick("stiffness"), pick("damping"), self.contact_stiffness,
-                                      self.uplift_force, "rigid_mass" if self.pantograph_model == 1 else "chain", self.gravity)
+        def pick(stem):
+            return tuple(float(getattr(self, f"{stem}_{i}")) for i in range(1, n + 1))
+        params = PantographParameters(
+            pick("mass"),
+            pick("stiffness"),
+            pick("damping"),
+            self.contact_stiffness,
+            self.uplift_force,
+            "rigid_mass" if self.pantograph_model == 1 else "chain",
+            self.gravity,
+        )
         self._model = make_pantograph(params, self.time_step, self.reference_height)
         self.contact_force = self._model.settle(self.height)
         self._publish()

@@ -7,7 +7,15 @@ from pantohil.models.rig.chain import Rig, RigParameters
 
 VARIABLES = [
     Var("delay_steps", "integer", "parameter", "1", "Pure delay of the height path in steps", 0, 0),
-    Var("comm_decimation", "integer", "parameter", "1", "N_com: one height of every N_com reaches the drive (1: all)", 1, 1),
+    Var(
+        "comm_decimation",
+        "integer",
+        "parameter",
+        "1",
+        "N_com: one height of every N_com reaches the drive (1: all)",
+        1,
+        1,
+    ),
     Var("servo_bandwidth", "real", "parameter", "Hz", "Servo natural frequency (0: ideal tracking)", 0.0, 0.0),
     Var("servo_damping", "real", "parameter", "1", "Servo damping ratio", 0.7, 0.0),
     Var("loadcell_cutoff", "real", "parameter", "Hz", "Load-cell low-pass cut-off (0: none)", 0.0, 0.0),
@@ -25,7 +33,9 @@ VARIABLES = [
 
 class PantohilRig(PantohilSlave):
     author = "pantohil"
-    description = "HIL rig between model and pantograph: delay, N_com decimation with linear drive ramp, servo, load cell."
+    description = (
+        "HIL rig between model and pantograph: delay, N_com decimation with linear drive ramp, servo, load cell."
+    )
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)

@@ -110,7 +110,9 @@ def _coerce_list(key: Key, value) -> list:
         if not math.isfinite(v):
             raise CaseError(f"{name}[{i}]: must be a finite number, got {v!r}")
         if not p.contains(v):
-            raise CaseError(f"{name}[{i}]: {v:g} {p.unit} is outside its range {p.range_text()}".replace(" 1 is", " is"))
+            raise CaseError(
+                f"{name}[{i}]: {v:g} {p.unit} is outside its range {p.range_text()}".replace(" 1 is", " is")
+            )
     return [float(v) for v in value]
 
 

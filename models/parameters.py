@@ -54,7 +54,9 @@ class Param:
             return "any"
         lo = "-inf" if self.low is None else f"{self.low:g}"
         hi = "inf" if self.high is None else f"{self.high:g}"
-        return f"{'(' if self.low_open or self.low is None else '['}{lo}, {hi}{')' if self.high_open or self.high is None else ']'}"
+        opening = "(" if self.low_open or self.low is None else "["
+        closing = ")" if self.high_open or self.high is None else "]"
+        return f"{opening}{lo}, {hi}{closing}"
 
     def contains(self, x: float) -> bool:
         if self.low is not None and (x <= self.low if self.low_open else x < self.low):

@@ -38,7 +38,7 @@ def _geometry_plot(path: Path, cat, ff) -> None:
     fig, ax = plt.subplots(figsize=(10, 4))
     ax.plot(x, ff.heights[sec.cw_w[sel]], color="tab:red", lw=1.5, label="contact wire")
     ax.plot(x, ff.heights[sec.mw_w[sel]], color="tab:blue", lw=1.5, label="messenger wire")
-    for xs, wd in zip(sec.stitch_x, sec.stitch_w):
+    for xs, wd in zip(sec.stitch_x, sec.stitch_w, strict=False):
         xl = xs - mid * L
         keep = (xl >= -1e-9) & (xl <= L + 1e-9)
         if keep.any():
@@ -50,7 +50,9 @@ def _geometry_plot(path: Path, cat, ff) -> None:
     ax.set_ylabel("height above the contact wire at the supports [m]")
     ax.set_title(f"{cat.name}: one span (droppers grey)")
     handles, labels = ax.get_legend_handles_labels()
-    ax.legend(dict(zip(labels, handles)).values(), dict(zip(labels, handles)).keys(), fontsize=8)
+    ax.legend(
+        dict(zip(labels, handles, strict=False)).values(), dict(zip(labels, handles, strict=False)).keys(), fontsize=8
+    )
     ax.grid(alpha=0.3)
     save_figure(fig, path)
 
@@ -92,11 +94,19 @@ def catenary_report(path: Path, out_dir: Path) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = {**a.summary(), "source": str(path), "elapsed_s": time.perf_counter() - t0}
-    _write_csv(out_dir / "profile.csv", ["x_m", "z0_m"], ((f"{x:.4f}", f"{z:.9e}") for x, z in zip(a.profile_x_m, a.profile_z_m)))
-    _write_csv(out_dir / "stiffness.csv", ["x_m", "kz_N_m"], ((f"{x:.4f}", f"{k:.3f}") for x, k in zip(a.stiffness_x_m, a.stiffness_N_m)))
+    _write_csv(
+        out_dir / "profile.csv",
+        ["x_m", "z0_m"],
+        ((f"{x:.4f}", f"{z:.9e}") for x, z in zip(a.profile_x_m, a.profile_z_m, strict=False)),
+    )
+    _write_csv(
+        out_dir / "stiffness.csv",
+        ["x_m", "kz_N_m"],
+        ((f"{x:.4f}", f"{k:.3f}") for x, k in zip(a.stiffness_x_m, a.stiffness_N_m, strict=False)),
+    )
     _write_csv(out_dir / "droppers.csv", ["dropper", "x_m", "length_m", "tension_N"],
                ((i + 1, f"{x:.4f}", f"{L:.6f}", f"{T:.3f}") for i, (x, L, T) in
-                enumerate(zip(a.dropper_positions_m, a.dropper_lengths_m, a.dropper_tensions_N))))
+                enumerate(zip(a.dropper_positions_m, a.dropper_lengths_m, a.dropper_tensions_N, strict=False))))
     _geometry_plot(out_dir / "geometry.png", cat, form_find(cat, 3))
     _stiffness_plot(out_dir / "stiffness.png", a)
     tmp = out_dir / "catenary.json.part"

@@ -59,11 +59,15 @@ class RowEncoder:
 
     def encode(self, t: np.ndarray, columns: np.ndarray) -> list[bytes]:
         columns = np.asarray(columns, dtype=float)
-        rows = zip(np.asarray(t, dtype=float).tolist(), columns.tolist())
+        rows = zip(np.asarray(t, dtype=float).tolist(), columns.tolist(), strict=False)
         if bool(np.isfinite(columns).all()):
             return [(self._template % (ti, *row)).encode() for ti, row in rows]
-        return [json.dumps(dict(zip(self.keys, [ti, *[v if math.isfinite(v) else None for v in row]]))).encode()
-                for ti, row in rows]
+        return [
+            json.dumps(
+                dict(zip(self.keys, [ti, *[v if math.isfinite(v) else None for v in row]], strict=False))
+            ).encode()
+            for ti, row in rows
+        ]
 
 
 def _finite(value):

@@ -40,7 +40,8 @@ def number(low: float | None = None, high: float | None = None, integer: bool = 
         try:
             value = int(text) if integer else float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if integer else 'a number'}, got {text!r}")
+            kind = "an integer" if integer else "a number"
+            raise argparse.ArgumentTypeError(f"expected {kind}, got {text!r}") from None
         if not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
         if (low is not None and value < low) or (high is not None and value > high):
@@ -62,11 +63,8 @@ def _add_case_args(p: argparse.ArgumentParser, optional: bool) -> None:
                    help="override a case key, e.g. --set hil.update=span (repeatable)")
 
 
-def _parser() -> argparse.ArgumentParser:
-    ap = _Parser(prog="pantohil", description="HIL pantograph tests against a virtual periodic "
-                                                               "catenary, built from FMI 2.0 co-simulation units.")
-    sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser)
-
+def _add_run_command(sub) -> None:
+    """`pantohil run` and its options."""
     run = sub.add_parser("run", help="virtual HIL run of a case or of an SSP file written by `pantohil build --ssp`")
     _add_case_args(run, optional=True)
     run.add_argument("--out", type=Path, help="run folder (default: runs/<case>-<time>)")
@@ -84,12 +82,18 @@ def _parser() -> argparse.ArgumentParser:
                      help="with --live: start stepping once a viewer has subscribed to a channel")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
+
+def _add_watch_command(sub) -> None:
+    """`pantohil watch` and its options."""
     watch = sub.add_parser("watch", help="follow a run's log as it is written: convergence, span force, newest "
                                          "values (a terminal view; Foxglove users: `run --live`)")
     watch.add_argument("folder", type=Path, help="run folder (the --out of `pantohil run`)")
     watch.add_argument("--interval", type=float, default=0.5, metavar="S", help="seconds between reads (default 0.5)")
     watch.add_argument("--once", action="store_true", help="show what the log holds now and exit")
 
+
+def _add_rig_emulator_command(sub) -> None:
+    """`pantohil rig-emulator` and its options."""
     emu = sub.add_parser("rig-emulator", help="play a rig controller over UDP for a case (lockstep, fault injection)")
     emu.add_argument("--listen", required=True, metavar="HOST:PORT", help="address to listen on")
     emu.add_argument("--case", type=Path, help="case file (TOML); default: the built-in case")
@@ -97,17 +101,29 @@ def _parser() -> argparse.ArgumentParser:
     for name, what in (("loss", "drop an answer"), ("reorder", "send an answer after the next one"),
                        ("duplicate", "send an answer twice"), ("corrupt", "flip a bit of an answer")):
         emu.add_argument(f"--{name}", type=number(0.0, 1.0), default=0.0, metavar="P", help=f"probability to {what}")
-    emu.add_argument("--delay-us", type=number(0.0, 1e6, unit="us"), default=0.0, help="wait this long before each answer [us]")
+    emu.add_argument(
+        "--delay-us", type=number(0.0, 1e6, unit="us"), default=0.0, help="wait this long before each answer [us]"
+    )
     emu.add_argument("--seed", type=number(0, 2**31 - 1, integer=True), default=0, help="seed of the fault injection")
     emu.add_argument("--stats", type=Path, help="write the emulator's counters to this JSON file")
-    emu.add_argument("--max-seconds", type=number(0.0, 1e7, unit="s"), help="stop after this long (default: until SIGTERM/Ctrl-C)")
+    emu.add_argument(
+        "--max-seconds", type=number(0.0, 1e7, unit="s"), help="stop after this long (default: until SIGTERM/Ctrl-C)"
+    )
     emu.add_argument("--rt-priority", type=number(0, 99, integer=True), default=49, metavar="P",
                      help="SCHED_FIFO priority if permitted (0: normal scheduling; default 49)")
 
+
+def _add_catenary_command(sub) -> None:
+    """`pantohil catenary` and its options."""
     catenary = sub.add_parser("catenary", help="form-finding, stiffness and ASM fit of a catenary file (FE model)")
-    catenary.add_argument("file", type=Path, help="catenary definition (TOML), e.g. models/data/catenaries/paper_a_stitched.toml")
+    catenary.add_argument(
+        "file", type=Path, help="catenary definition (TOML), e.g. models/data/catenaries/paper_a_stitched.toml"
+    )
     catenary.add_argument("--out", type=Path, required=True, help="folder for catenary.json, CSV files and plots")
 
+
+def _add_build_command(sub) -> None:
+    """`pantohil build` and its options."""
     build = sub.add_parser("build", help="build and validate the four FMUs of a case (catenary, rig, pantograph, "
                                          "hardware adapter); optionally an SSP file of the virtual HIL system")
     _add_case_args(build, optional=True)
@@ -115,27 +131,52 @@ def _parser() -> argparse.ArgumentParser:
     build.add_argument("--ssp", type=Path, metavar="FILE.ssp",
                        help="also write the whole system as an SSP file, with an OSP system structure next to it")
 
+
+def _add_package_command(sub) -> None:
+    """`pantohil package` and its options."""
     package = sub.add_parser("package", help="folder for a partner lab: FMUs, SSP/OSP files, runner, reference results")
     _add_case_args(package, optional=True)
     package.add_argument("--out", type=Path, required=True, help="package folder (must not exist or be empty)")
     package.add_argument("--zip", action="store_true", help="also write OUT.zip")
     package.add_argument("--quiet", action="store_true", help="no progress bar")
 
-    fem = sub.add_parser("fem-sim", help="conventional simulation of a finite section of N spans of the case's catenary "
-                                         "(the reference for the periodic models, Paper C sec. 6)")
+
+def _add_fem_sim_command(sub) -> None:
+    """`pantohil fem-sim` and its options."""
+    fem = sub.add_parser(
+        "fem-sim",
+        help="conventional simulation of a finite section of N spans of the case's catenary "
+        "(the reference for the periodic models, Paper C sec. 6)",
+    )
     _add_case_args(fem, optional=False)
-    fem.add_argument("--spans", type=number(1, MAX_FEM_SPANS, integer=True), required=True, help="number of spans of the section")
-    fem.add_argument("--central", type=number(1, MAX_FEM_SPANS, integer=True), default=3, help="central spans whose statistics are reported (default 3)")
+    fem.add_argument(
+        "--spans", type=number(1, MAX_FEM_SPANS, integer=True), required=True, help="number of spans of the section"
+    )
+    fem.add_argument(
+        "--central",
+        type=number(1, MAX_FEM_SPANS, integer=True),
+        default=3,
+        help="central spans whose statistics are reported (default 3)",
+    )
     fem.add_argument("--out", type=Path, required=True, help="run folder")
     fem.add_argument("--quiet", action="store_true", help="no progress bar")
 
+
+def _add_compare_command(sub) -> None:
+    """`pantohil compare` and its options."""
     compare = sub.add_parser("compare", help="contact force of two run folders overlaid (HIL or fem-sim), 20 Hz")
     compare.add_argument("run_a", type=Path)
     compare.add_argument("run_b", type=Path)
     compare.add_argument("--out", type=Path, required=True, help="folder for compare.json and plots")
 
-    stab = sub.add_parser("stability", help="spectral radius of the virtual HIL iteration over f_max, contact stiffness "
-                                            "and delay, with the best relaxation (Paper D sec. 4, Figs. 5-7)")
+
+def _add_stability_command(sub) -> None:
+    """`pantohil stability` and its options."""
+    stab = sub.add_parser(
+        "stability",
+        help="spectral radius of the virtual HIL iteration over f_max, contact stiffness "
+        "and delay, with the best relaxation (Paper D sec. 4, Figs. 5-7)",
+    )
     _add_case_args(stab, optional=True)
     stab.add_argument("--update", choices=("step", "span"), help="updating strategy (default: the case's)")
     stab.add_argument("--fmax", metavar="A:B:N", help="highest frequency of the catenary response [Hz] "
@@ -147,29 +188,68 @@ def _parser() -> argparse.ArgumentParser:
     stab.add_argument("--relaxation", type=number(0.0, 2.0), help="fix mu_c instead of searching the best one")
     stab.add_argument("--out", type=Path, required=True, help="folder for stability.csv, maps and summary.json")
     stab.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: a LocalCluster)")
-    stab.add_argument("--workers", type=number(1, MAX_WORKERS, integer=True), help="LocalCluster worker processes (default: 2)")
+    stab.add_argument(
+        "--workers", type=number(1, MAX_WORKERS, integer=True), help="LocalCluster worker processes (default: 2)"
+    )
     stab.add_argument("--quiet", action="store_true", help="no progress bar")
 
+
+def _add_sweep_command(sub) -> None:
+    """`pantohil sweep` and its options."""
     sweep = sub.add_parser("sweep", help="a grid over case keys as independent runs on Dask (resumable; CSV, "
                                          "Parquet and plots)")
     sweep.add_argument("file", type=Path, help="sweep file (TOML), e.g. models/data/sweeps/speed_200_300.toml")
     sweep.add_argument("--out", type=Path, required=True, help="sweep folder (a restart into it skips done points)")
     sweep.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://10.0.0.1:8786 "
                                                               "(default: a LocalCluster)")
-    sweep.add_argument("--workers", type=number(1, MAX_WORKERS, integer=True), help="LocalCluster worker processes (default: 2)")
+    sweep.add_argument(
+        "--workers", type=number(1, MAX_WORKERS, integer=True), help="LocalCluster worker processes (default: 2)"
+    )
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
 
+
+def _add_example_command(sub) -> None:
+    """`pantohil example` and its options."""
     example = sub.add_parser("example", help="reproduce a worked example of the thesis")
     example.add_argument("name", choices=["paper-c-appendix"],
                          help="paper-c-appendix: the academic periodic string of Paper C, Appendix A")
     example.add_argument("--out", type=Path, required=True, help="folder for summary.json and a plot")
 
+
+def _add_direct_command(sub) -> None:
+    """`pantohil direct` and its options."""
     direct = sub.add_parser("direct", help="closed-form ASM steady state of a case (Paper A)")
     _add_case_args(direct, optional=True)
     direct.add_argument("--second-pantograph-at", type=number(0.0, 10_000.0, unit="m"), metavar="L",
                         help="spacing of a trailing pantograph [m]: its std and the optimal spacings L_min")
-    direct.add_argument("--max-spacing", type=number(0.0, 10_000.0, unit="m"), default=200.0, help="longest L_min listed [m]")
+    direct.add_argument(
+        "--max-spacing", type=number(0.0, 10_000.0, unit="m"), default=200.0, help="longest L_min listed [m]"
+    )
     direct.add_argument("--out", type=Path, help="also write the result as JSON to this file")
+
+
+COMMANDS = (  # the order of `pantohil --help`
+    _add_run_command,
+    _add_watch_command,
+    _add_rig_emulator_command,
+    _add_catenary_command,
+    _add_build_command,
+    _add_package_command,
+    _add_fem_sim_command,
+    _add_compare_command,
+    _add_stability_command,
+    _add_sweep_command,
+    _add_example_command,
+    _add_direct_command,
+)
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = _Parser(prog="pantohil", description="HIL pantograph tests against a virtual periodic "
+                                                               "catenary, built from FMI 2.0 co-simulation units.")
+    sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for add_command in COMMANDS:
+        add_command(sub)
     return ap
 
 
@@ -219,11 +299,20 @@ def _cmd_run(args) -> int:
               f"{result['timing']['realtime_factor']:.1f}x real time")
     if "realtime" in result:
         rt = result["realtime"]
-        print(f"real time ({rt['scheduling']}): {rt['deadline_misses']} of {rt['steps']} deadlines missed; lateness p50 "
-              f"{rt['lateness_us']['p50']:.0f} us, p99 {rt['lateness_us']['p99']:.0f} us, max {rt['lateness_us']['max']:.0f} us")
+        print(
+            f"real time ({rt['scheduling']}): {rt['deadline_misses']} of {rt['steps']} deadlines missed; lateness p50 "
+            f"{rt['lateness_us']['p50']:.0f} us, p99 {rt['lateness_us']['p99']:.0f} us, "
+            f"max {rt['lateness_us']['max']:.0f} us"
+        )
     if "link" in result:
         ln = result["link"]
-        print("link: " + ", ".join(f"{k} {ln[k]}" for k in ("sent", "received", "lost", "late", "reordered", "duplicated", "malformed", "limited")))
+        print(
+            "link: "
+            + ", ".join(
+                f"{k} {ln[k]}"
+                for k in ("sent", "received", "lost", "late", "reordered", "duplicated", "malformed", "limited")
+            )
+        )
     print(f"run folder: {out}")
     if result["status"] == "link_lost":
         print(f"pantohil: error: {result['message']}", file=sys.stderr)
@@ -296,7 +385,7 @@ def _cmd_build(args) -> int:
         names = ("catenary", "rig", "pantograph", "adapter") if args.out is not None else FMU_NAMES
         fmus = build_case_fmus(case, args.out or Path(tmp), plan["delay_steps"], names)
         bad = 0
-        for name, path in fmus.items():
+        for path in fmus.values():
             problems = validate_fmu(str(path))
             bad += len(problems)
             if args.out is not None:
@@ -351,15 +440,23 @@ def _cmd_direct(args) -> int:
         raise CaseError(f"--second-pantograph-at: must be > 0 m (got {args.second_pantograph_at:g})")
     res = direct_solution(case, args.second_pantograph_at, args.max_spacing)
     s = res["single"]
-    print(f"{case.name}: {res['speed_kmh']:.0f} km/h, {res['harmonics']} harmonics up to {res['max_frequency_hz']:.2f} Hz")
-    print(f"single pantograph: mean {s['mean_N']:.2f} N, std {s['std_N']:.3f} N (harmonics <= 20 Hz: {s['std_20hz_N']:.3f} N)")
+    print(
+        f"{case.name}: {res['speed_kmh']:.0f} km/h, {res['harmonics']} harmonics up to {res['max_frequency_hz']:.2f} Hz"
+    )
+    print(
+        f"single pantograph: mean {s['mean_N']:.2f} N, std {s['std_N']:.3f} N "
+        f"(harmonics <= 20 Hz: {s['std_20hz_N']:.3f} N)"
+    )
     if "two_pantographs" in res:
         t = res["two_pantographs"]
         print(f"two pantographs {t['spacing_m']:g} m apart: leading std {t['leading_std_N']:.3f} N, "
               f"trailing std {t['trailing_std_N']:.3f} N")
         for h in t["optimal_spacings_m"]:
             ls = ", ".join(f"{x:.1f}" for x in h["L_min_m"])
-            print(f"  L_min for harmonic {h['harmonic']} ({h['frequency_hz']:.2f} Hz, |Z| {h['z0_amplitude_m'] * 1e3:.2f} mm): {ls} m")
+            print(
+                f"  L_min for harmonic {h['harmonic']} ({h['frequency_hz']:.2f} Hz, "
+                f"|Z| {h['z0_amplitude_m'] * 1e3:.2f} mm): {ls} m"
+            )
     if args.out:
         args.out.write_text(json.dumps(res, indent=2) + "\n")
     return 0

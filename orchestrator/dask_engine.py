@@ -6,7 +6,7 @@ import ctypes
 import logging
 import os
 from contextlib import contextmanager
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 from pantohil.models.case import CaseError
 
@@ -69,7 +69,7 @@ def run_tasks(client, fn: Callable, items: list, keys: Iterable[str], on_result:
     from tqdm import tqdm
 
     futures = client.map(fn, items, key=list(keys), pure=False)
-    item_of = {f.key: item for f, item in zip(futures, items)}
+    item_of = {f.key: item for f, item in zip(futures, items, strict=False)}
     try:
         with tqdm(total=len(futures), desc=desc, disable=not progress, unit="pt") as bar:
             for fut in as_completed(futures):

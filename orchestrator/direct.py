@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from pantohil.models.case import Case
-from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, optimal_spacings, single_pantograph, two_pantographs
+from pantohil.models.catenary.asm.closed_form import (one_sided_harmonics, optimal_spacings, single_pantograph,
+    two_pantographs)
 
 
 def direct_solution(case: Case, second_at_m: float | None = None, max_spacing_m: float = 200.0) -> dict:

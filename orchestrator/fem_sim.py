@@ -3,7 +3,6 @@ run folder; `pantohil compare`: two runs overlaid."""
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -92,8 +91,8 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
     }
     with open(out_dir / "central_spans.csv", "w") as fh:
         fh.write(f"span,t_s,f_N,f_lowpass_{CUTOFF_HZ:g}hz_N\n")  # the low-pass is of the whole run (no edge effect)
-        for j, blk, flt in zip(spans, blocks_raw, blocks):
-            for m, (f, ff) in enumerate(zip(blk, flt)):
+        for j, blk, flt in zip(spans, blocks_raw, blocks, strict=False):
+            for m, (f, ff) in enumerate(zip(blk, flt, strict=False)):
                 fh.write(f"{j},{m * dt:.6f},{f:.9g},{ff:.9g}\n")
     np.savetxt(out_dir / "dropper_corrections.csv", np.column_stack([np.arange(n) * dt, corr_mid]), delimiter=",",
                header="t_s," + ",".join(f"dropper_{d + 1}_N" for d in range(per_span)), comments="", fmt="%.9g")
@@ -108,7 +107,7 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
     report.plot_section_force(out_dir / "force_along_section.png", res.x_m, res.force_N, filtered, cat.span_m,
                               spans, f"{case.name}: {n_spans}-span section, {case.speed_kmh:.0f} km/h")
     report.plot_force_comparison(out_dir / "central_spans.png", dt,
-                                 {f"span {j} ({CUTOFF_HZ:g} Hz)": blk for j, blk in zip(spans, blocks)},
+                                 {f"span {j} ({CUTOFF_HZ:g} Hz)": blk for j, blk in zip(spans, blocks, strict=False)},
                                  f"{case.name}: central spans overlaid")
     report.plot_dropper_corrections(out_dir / "dropper_corrections.png", dt, corr_mid,
                                     f"{case.name}: dropper correction forces, span {mid}")

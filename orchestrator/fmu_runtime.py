@@ -1,7 +1,6 @@
 """One FMU instance driven through fmpy with preallocated ctypes buffers (the hot path of the master)."""
 from __future__ import annotations
 
-import ctypes
 import shutil
 import tempfile
 from pathlib import Path
@@ -21,7 +20,7 @@ class Port:
 
     _ctype = {"Real": fmi2Real, "Integer": fmi2Integer, "Boolean": fmi2Boolean}
 
-    def __init__(self, fmu: "FmuInstance", kind: str, names: list[str]):
+    def __init__(self, fmu: FmuInstance, kind: str, names: list[str]):
         self.fmu, self.kind, self.names = fmu, kind, list(names)
         self.n = len(names)
         self.vr = (fmi2ValueReference * self.n)(*[fmu.vr[name] for name in names])

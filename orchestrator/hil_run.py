@@ -29,6 +29,7 @@ from .channels import span_force_record
 from .master import JacobiMaster
 from .pacing import Pacer, set_realtime_priority
 from .recorder import McapRecorder
+import contextlib
 
 MASTERS = ("fmpy", "libcosim")
 LINK_FAULT = 2
@@ -54,14 +55,28 @@ VIRTUAL = Topology("virtual", FMU_NAMES, CONNECTIONS, {
     "/rig": {"actuator_height": "actuator height [m]", "measured_force": "measured force [N]"},
     "/pantograph": {"contact_force": "contact force [N]", "head_height": "head height [m]"},
 })
-HARDWARE = Topology("hardware", HARDWARE_FMU_NAMES, HARDWARE_CONNECTIONS, {
-    "/catenary": _CATENARY_GROUP,
-    "/adapter": {"command_sent": "height sent, within the actuator limits [m]",
-                 "measured_force": "force from the rig (NaN: no answer) [N]",
-                 "actuator_height": "actuator height reported by the rig [m]", "link_state": "0 ok, 1 missing, 2 fault",
-                 "sent": "[-]", "received": "[-]", "lost": "[-]", "late": "[-]", "reordered": "[-]", "duplicated": "[-]",
-                 "malformed": "[-]", "limited": "[-]"},
-})
+HARDWARE = Topology(
+    "hardware",
+    HARDWARE_FMU_NAMES,
+    HARDWARE_CONNECTIONS,
+    {
+        "/catenary": _CATENARY_GROUP,
+        "/adapter": {
+            "command_sent": "height sent, within the actuator limits [m]",
+            "measured_force": "force from the rig (NaN: no answer) [N]",
+            "actuator_height": "actuator height reported by the rig [m]",
+            "link_state": "0 ok, 1 missing, 2 fault",
+            "sent": "[-]",
+            "received": "[-]",
+            "lost": "[-]",
+            "late": "[-]",
+            "reordered": "[-]",
+            "duplicated": "[-]",
+            "malformed": "[-]",
+            "limited": "[-]",
+        },
+    },
+)
 LINK_COUNTERS = ("sent", "received", "lost", "late", "reordered", "duplicated", "malformed", "limited")
 
 
@@ -88,8 +103,10 @@ def delay_plan(case: Case, topology: Topology = VIRTUAL) -> dict:
         loop += case.values["link"]["pipeline_steps"]
     d = case.delay_steps(loop)
     if d >= case.samples_per_span:
-        raise CaseError(f"rig.delay_steps: the delay advance D = {d} steps (loop {loop} + rig "
-                        f"{case.rig.latency_steps(case.dt_s)}) must be shorter than a span ({case.samples_per_span} steps)")
+        raise CaseError(
+            f"rig.delay_steps: the delay advance D = {d} steps (loop {loop} + rig "
+            f"{case.rig.latency_steps(case.dt_s)}) must be shorter than a span ({case.samples_per_span} steps)"
+        )
     return {"delay_steps": d, "loop_latency_steps": loop, "rig_latency_steps": case.rig.latency_steps(case.dt_s)}
 
 
@@ -247,16 +264,16 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
         extra["link"] = {c: int(master.record_int["adapter"][last, master.int_outputs["adapter"].index(c)])
                          for c in LINK_COUNTERS}
         extra["link"]["rig"] = f"{hardware[0]}:{hardware[1]}"
-        extra["link"]["rig_latency_steps"] = int(master.record_int["adapter"][last, master.int_outputs["adapter"].index("rig_latency_steps")])
+        extra["link"]["rig_latency_steps"] = int(
+            master.record_int["adapter"][last, master.int_outputs["adapter"].index("rig_latency_steps")]
+        )
     return _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, build_s, per_step,
                    master_kind, extra)
 
 
 def _back_to_normal() -> None:
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-    except (OSError, AttributeError):
-        pass
 
 
 def _link_state_now(master) -> int:
@@ -382,7 +399,11 @@ def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, b
         report.plot_contact_force(out_dir / "contact_force.png", dt, overlay, ref, filtered,
                                   f"{case.name}: {case.speed_kmh:.0f} km/h, {status} after {spans_done} spans")
     if monitor.history:
-        report.plot_convergence(out_dir / "convergence.png", monitor.history, case.values["run"]["convergence_tol"],
-                                f"{case.name}: {case.hil_update}-by-{case.hil_update} updating, mu_c = {case.relaxation}")
+        report.plot_convergence(
+            out_dir / "convergence.png",
+            monitor.history,
+            case.values["run"]["convergence_tol"],
+            f"{case.name}: {case.hil_update}-by-{case.hil_update} updating, mu_c = {case.relaxation}",
+        )
     report.write_json_atomic(out_dir / "summary.json", summary)
     return RunResult(summary)

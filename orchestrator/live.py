@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import collections
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -124,7 +124,7 @@ class LivePublisher:
         t = steps * self.dt_s
         for topic, encoder in self._encoders.items():
             columns = self._block(topic, first, stop)[::d]
-            for ti, data in zip(t.tolist(), encoder.encode(t, columns)):
+            for ti, data in zip(t.tolist(), encoder.encode(t, columns), strict=False):
                 self._log(topic, ti, data)
         self._next_step = stop
 

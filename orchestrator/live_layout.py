@@ -28,7 +28,7 @@ def _plot(title: str, series: list[tuple[str, str]], **config) -> fl.PlotPanel:
 def _row(*panels, proportions=None) -> fl.SplitContainer:
     proportions = proportions or [1] * len(panels)
     return fl.SplitContainer(direction="row", items=[fl.SplitItem(proportion=p, content=c)
-                                                     for p, c in zip(proportions, panels)])
+                                                     for p, c in zip(proportions, panels, strict=False)])
 
 
 def _convergence_row() -> fl.SplitContainer:

@@ -8,6 +8,7 @@ import os
 import time
 
 import numpy as np
+import contextlib
 
 SPIN_S = 0.0001  # spin (not sleep) for the last 0.1 ms: sleep wakes up ~60 us late. Spinning much longer
                  # starves a rig emulator or logger on the machine, and under SCHED_FIFO it runs into the
@@ -28,14 +29,10 @@ def set_realtime_priority(priority: int | None) -> str:
 
 def background_priority() -> None:
     """For helper processes (the logger): never compete with the stepping loop or a rig emulator."""
-    try:
+    with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-    except (OSError, AttributeError):
-        pass
-    try:
+    with contextlib.suppress(OSError):
         os.nice(10)
-    except OSError:
-        pass
 
 
 class Pacer:

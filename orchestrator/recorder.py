@@ -6,9 +6,9 @@ finishes it by itself if the run's process dies, so a run that stops early stays
 """
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import multiprocessing as mp
-import os
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +25,7 @@ class McapWriter:
     """Writes messages in the calling process."""
 
     def __init__(self, path: Path, groups: dict[str, dict[str, str]], metadata: dict[str, str] | None = None):
-        self._fh = open(path, "wb")
+        self._fh = open(path, "wb")  # noqa: SIM115 (open for the writer's life, closed in close())
         self._writer = Writer(self._fh, chunk_size=CHUNK_BYTES)
         self._writer.start(profile="", library="pantohil")
         if metadata:
@@ -44,7 +44,8 @@ class McapWriter:
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
         """Write rows (t[i], columns[i, :]) as messages of one channel."""
         channel, add = self._channels[topic], self._writer.add_message
-        for ti, data in zip(np.asarray(t, dtype=float).tolist(), self._encoders[topic].encode(t, columns)):
+        encoded = self._encoders[topic].encode(t, columns)
+        for ti, data in zip(np.asarray(t, dtype=float).tolist(), encoded, strict=False):
             ns = int(round(ti * 1e9))
             add(channel, ns, data, ns)
         self.messages += len(t)
@@ -107,10 +108,8 @@ class McapRecorder:
     def __init__(self, path: Path, groups: dict[str, dict[str, str]], metadata: dict[str, str] | None = None):
         ctx = mp.get_context("fork")
         recv, self._send = ctx.Pipe(duplex=False)
-        try:
+        with contextlib.suppress(OSError, AttributeError):  # the default pipe size only blocks logging longer
             fcntl.fcntl(self._send.fileno(), fcntl.F_SETPIPE_SZ, PIPE_BYTES)
-        except (OSError, AttributeError):
-            pass  # the default pipe size only makes logging block a little longer
         self._proc = ctx.Process(target=_writer_process, args=(recv, str(path), groups, metadata),
                                  name="pantohil-mcap", daemon=False)
         self._proc.start()
@@ -130,10 +129,8 @@ class McapRecorder:
         if self._closed:
             return
         self._closed = True
-        try:
+        with contextlib.suppress(BrokenPipeError, OSError):
             self._send.send(("close",))
-        except (BrokenPipeError, OSError):
-            pass
         self._send.close()
         self._proc.join(timeout_s)
         if self._proc.exitcode not in (0, None):

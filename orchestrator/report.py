@@ -1,6 +1,7 @@
 """Run-folder outputs: summary.json, steady_span.csv and the plots."""
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -44,7 +45,7 @@ def write_json_atomic(path: Path, data: dict) -> None:
 
 
 def write_steady_span(path: Path, t: np.ndarray, z0: np.ndarray, z: np.ndarray, f: np.ndarray) -> None:
-    rows = "\n".join(f"{a:.6f},{b:.12e},{c:.12e},{d:.12e}" for a, b, c, d in zip(t, z0, z, f))
+    rows = "\n".join(f"{a:.6f},{b:.12e},{c:.12e},{d:.12e}" for a, b, c, d in zip(t, z0, z, f, strict=False))
     tmp = path.with_suffix(".csv.part")
     tmp.write_text("t_s,z0_m,z_m,f_N\n" + rows + "\n")
     os.replace(tmp, path)
@@ -180,6 +181,11 @@ def _is_geometric(values: np.ndarray) -> bool:
     return bool(np.allclose(r, r[0], rtol=1e-6) and not np.allclose(np.diff(values), values[1] - values[0], rtol=1e-6))
 
 
+def _at_delay(index: dict, delay_steps, f_max_hz, contact_stiffness_N_m):
+    """The map row of one delay, f_max and contact stiffness, or None."""
+    return index.get((delay_steps, f_max_hz, contact_stiffness_N_m))
+
+
 def plot_stability_maps(out: Path, rows: list[dict], pantograph, update: str, case_name: str) -> list[str]:
     """Paper D Figs. 5-7: spectral radius (unstable region blank) and the relaxation chosen, with the
     pantograph's contact natural frequency in red. Axes: contact stiffness (or delay) against f_max."""
@@ -195,7 +201,7 @@ def plot_stability_maps(out: Path, rows: list[dict], pantograph, update: str, ca
     if len(k) == 1 and len(d) > 1:  # Paper D Fig. 7: delay against f_max at one contact stiffness
         panels = [("delay", d, lambda fi, xi: index.get((xi, fi, k[0])), f"D{d[0]}-{d[-1]}")]
     else:
-        panels = [("kc", k, (lambda dd: lambda fi, xi: index.get((dd, fi, xi)))(dd), f"D{dd}") for dd in d]
+        panels = [("kc", k, functools.partial(_at_delay, index, dd), f"D{dd}") for dd in d]
     for axis, xs, get, tag in panels:
         if len(xs) * len(f) < 2:
             continue

@@ -23,6 +23,7 @@ from pantohil.fmus import udp_protocol as proto
 from pantohil.models.case import Case
 from pantohil.models.pantograph.lumped import make_pantograph
 from pantohil.models.rig.chain import Rig
+import contextlib
 
 RCVBUF_BYTES = 4 << 20
 
@@ -107,10 +108,8 @@ class RigEmulator:
         self._z, self._v = z, v
 
     def _send(self, data: bytes, peer) -> None:
-        try:
+        with contextlib.suppress(OSError):
             self.sock.sendto(data, peer)
-        except OSError:
-            pass
 
     def _answer(self, reply: bytes, peer) -> None:
         f, r, s = self.faults, self._rng.random(), self.stats
@@ -197,7 +196,7 @@ class RigEmulator:
             while not self._stop and time.monotonic() < end:
                 try:
                     data, peer = self.sock.recvfrom(2048)
-                except socket.timeout:
+                except TimeoutError:
                     continue
                 except OSError:
                     continue

@@ -29,7 +29,7 @@ import shutil
 import subprocess
 import sys
 import time
-from datetime import datetime, timezone
+from datetime import datetime, UTC
 from pathlib import Path
 
 import numpy as np
@@ -146,7 +146,7 @@ def load_sweep(path: Path) -> dict:
         _fail(path, f"sweep.plot_x {plot_x!r} is not a grid key")
     points = []
     for combo in itertools.product(*values.values()):
-        assign = dict(zip(values, combo))
+        assign = dict(zip(values, combo, strict=False))
         overrides = [f"{k}={_toml_value(v)}" for k, v in {**fixed, **assign}.items() if k not in DIRECT_KEYS]
         extra = {k: v for k, v in {**fixed, **assign}.items() if k in DIRECT_KEYS}
         try:
@@ -197,7 +197,7 @@ def sweep_point(task: dict) -> dict:
                "std_20hz_N": cf.get("filtered_20hz", {}).get("std_N"), "max_N": cf.get("max_N"),
                "min_N": cf.get("min_N"), "message": s["message"]}
     out["wall_s"] = time.perf_counter() - t0
-    out["finished_utc"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    out["finished_utc"] = datetime.now(UTC).isoformat(timespec="seconds")
     return out
 
 
@@ -250,7 +250,7 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
             f"on {n_workers} workers")
         tasks = [{"kind": definition["kind"], "case": definition["case"], "overrides": p["overrides"],
                   "extra": p["extra"], "folder": str((out / "points" / p["id"]).resolve())} for p in todo]
-        by_task = {id(t): p for t, p in zip(tasks, todo)}
+        by_task = {id(t): p for t, p in zip(tasks, todo, strict=False)}
         t0 = time.perf_counter()
 
         def keep(task, result, error):
@@ -258,7 +258,7 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
             row = {"point": p["id"], **p["assign"]}
             if error:
                 row.update(status="error", message=error.splitlines()[0][:300],
-                           finished_utc=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+                           finished_utc=datetime.now(UTC).isoformat(timespec="seconds"))
             else:
                 row.update(result)
             rows.append(row)

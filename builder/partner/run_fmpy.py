@@ -66,7 +66,7 @@ def main() -> int:
                 fmu.setReal([vr[inp].valueReference], [outputs[src][out]])
             if k >= steps - n:
                 force[k - (steps - n)] = outputs["rig"]["measured_force"]  # the catenary's input this step
-            for name, (fmu, vr) in fmus.items():
+            for fmu, _ in fmus.values():
                 fmu.doStep(currentCommunicationPoint=k * dt, communicationStepSize=dt)
             for name, (fmu, vr) in fmus.items():
                 for out in outputs[name]:

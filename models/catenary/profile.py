@@ -94,4 +94,4 @@ def write_profile_csv(path: Path, profile, n_points: int = 6501) -> None:
     with Path(path).open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["x_m", "z0_m"])
-        w.writerows((f"{a:.6f}", f"{b:.9e}") for a, b in zip(x, z))
+        w.writerows((f"{a:.6f}", f"{b:.9e}") for a, b in zip(x, z, strict=False))

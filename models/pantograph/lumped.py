@@ -143,7 +143,7 @@ class ChainPantograph:
         n, M, C, K, e1 = self.params.n, self.M, self.C, self.K, self.e1
         K1 = self.K_act if contact else K
         S = np.linalg.inv(M + (1 + a) * (g * dt * C + b * dt * dt * K1))
-        I, Z = np.eye(n), np.zeros((n, n))
+        I, Z = np.eye(n), np.zeros((n, n))  # noqa: E741 (identity and zero blocks)
         # predictors as maps of [u, v, a]
         u_pred = np.hstack([I, dt * I, dt * dt * (0.5 - b) * I])
         v_pred = np.hstack([Z, I, dt * (1 - g) * I])
@@ -154,7 +154,8 @@ class ChainPantograph:
         col_f = S @ (a * e1)  # -alpha * (-(f_old - F_up) e1), force part
         const = S @ (-a * self.f_up * e1 + (1 + a) * (self.f_up - (self.kc * self.head_ref if contact else 0.0)) * e1)
         A_acc = np.hstack([acc, col_z[:, None], col_f[:, None], const[:, None]])
-        ext = lambda m: np.hstack([m, np.zeros((n, 3))])
+        def ext(m):
+            return np.hstack([m, np.zeros((n, 3))])
         A_u = ext(u_pred) + b * dt * dt * A_acc
         A_v = ext(v_pred) + g * dt * A_acc
         return np.vstack([A_u, A_v, A_acc])

@@ -41,7 +41,8 @@ class Limiter:
         v = min(max(v, -lim.max_velocity_m_s), lim.max_velocity_m_s)
         # braking: the velocity towards an end must let the actuator stop before it (discrete bound)
         a = lim.max_acceleration_m_s2
-        brake = lambda d: max(0.0, ((2 * a * d + (a * dt / 2) ** 2) ** 0.5 - a * dt / 2))
+        def brake(d):
+            return max(0.0, ((2 * a * d + (a * dt / 2) ** 2) ** 0.5 - a * dt / 2))
         v = min(v, max(brake(lim.stroke_max_m - self.z - v * dt), self.v - dv))
         v = max(v, min(-brake(self.z + v * dt - lim.stroke_min_m), self.v + dv))
         z = min(max(self.z + v * dt, lim.stroke_min_m), lim.stroke_max_m)  # a safety net only

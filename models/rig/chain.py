@@ -80,7 +80,9 @@ class Rig:
         self._servo = None
         if params.servo_bandwidth_hz > 0:
             wn = 2 * math.pi * params.servo_bandwidth_hz
-            self._servo = _DiscreteFilter([wn * wn], [1.0, 2 * params.servo_damping * wn, wn * wn], dt_s, initial_height)
+            self._servo = _DiscreteFilter(
+                [wn * wn], [1.0, 2 * params.servo_damping * wn, wn * wn], dt_s, initial_height
+            )
         self._loadcell = None
         if params.loadcell_cutoff_hz > 0:
             wc = 2 * math.pi * params.loadcell_cutoff_hz

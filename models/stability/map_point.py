@@ -18,7 +18,8 @@ from scipy.optimize import minimize_scalar
 from pantohil.models.hil.loop import HilSettings
 from pantohil.models.pantograph.linear import LinearPantograph, linear_pantograph
 from pantohil.models.pantograph.lumped import PantographParameters
-from pantohil.models.stability.maps import circulant_dense, circulant_range_basis, range_basis, reduced_span_map, span_map, step_matrix
+from pantohil.models.stability.maps import (circulant_dense, circulant_range_basis, range_basis, reduced_span_map,
+    span_map, step_matrix)
 from pantohil.models.stability.step_roots import step_loop, step_spectral_radius
 
 # relaxations tried before the local refinement (the radius is not unimodal in mu everywhere)

@@ -27,7 +27,10 @@ def main() -> None:
                                       capture_output=True, text=True)
                 times.append(time.perf_counter() - t0)
                 assert proc.returncode == 0, proc.stderr
-        print(f"{name:18s} median {statistics.median(times):.2f} s (min {min(times):.2f}, max {max(times):.2f}) over {args.repeats}")
+        print(
+            f"{name:18s} median {statistics.median(times):.2f} s (min {min(times):.2f}, max {max(times):.2f}) "
+            f"over {args.repeats}"
+        )
 
 
 if __name__ == "__main__":

@@ -30,9 +30,12 @@ def main() -> None:
         walls.append(r.wall_s)
         mem.append(r.peak_memory_bytes / 1e6)
     steps = len(r.force_N)
-    print(f"fem-sim {args.spans} spans ({steps} steps of {case.dt_s * 1e3:.0f} ms): median {statistics.median(walls):.1f} s "
-          f"(min {min(walls):.1f}, max {max(walls):.1f}; limit 60 s), {statistics.median(walls) / steps * 1e6:.0f} us/step, "
-          f"peak memory {max(mem):.0f} MB")
+    print(
+        f"fem-sim {args.spans} spans ({steps} steps of {case.dt_s * 1e3:.0f} ms): "
+        f"median {statistics.median(walls):.1f} s (min {min(walls):.1f}, max {max(walls):.1f}; limit 60 s), "
+        f"{statistics.median(walls) / steps * 1e6:.0f} us/step, "
+        f"peak memory {max(mem):.0f} MB"
+    )
 
 
 if __name__ == "__main__":

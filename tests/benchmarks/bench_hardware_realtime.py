@@ -18,7 +18,9 @@ import numpy as np
 
 
 def cli(*args: str, **kw) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", *args], capture_output=True, text=True, **kw)
+    return subprocess.run(
+        [sys.executable, "-m", "pantohil.orchestrator.cli", *args], capture_output=True, text=True, **kw
+    )
 
 
 def main() -> None:
@@ -51,7 +53,7 @@ def main() -> None:
                   f"{rt['lateness_us']['p50']:.0f} us p99 {rt['lateness_us']['p99']:.0f} us max "
                   f"{rt['lateness_us']['max']:.0f} us, {rt['scheduling']}; lost {ln['lost']}, late {ln['late']}; "
                   f"rms difference from the virtual HIL {100 * diff:.3f} % of its std", flush=True)
-        med = [statistics.median(c) for c in zip(*rows)]
+        med = [statistics.median(c) for c in zip(*rows, strict=False)]
         print(f"median over {args.repeats}: misses {med[0]:.3f} %, lateness p50 {med[1]:.0f} us, p99 {med[2]:.0f} us, "
               f"max {med[3]:.0f} us, difference {100 * med[4]:.3f} %")
 

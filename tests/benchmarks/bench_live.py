@@ -73,7 +73,9 @@ def one_run(arm: int, out: Path, spans: int) -> dict:
         for line in run.stdout:  # wait on the server's line
             if "listening on" in line:
                 url = line.split("listening on ")[1].split()[0]
-                viewer = subprocess.Popen([sys.executable, __file__, "--client", url] + (["--stall"] if arm == 2 else []))
+                viewer = subprocess.Popen(
+                    [sys.executable, __file__, "--client", url] + (["--stall"] if arm == 2 else [])
+                )
                 break
     _, err = run.communicate()
     watcher.join()
@@ -118,7 +120,9 @@ def main() -> None:
         step = [r["us_per_step"] for r in rows]
         print(f"{name}:")
         print(_line("real time", rtf, "x") + f"  {100 * (statistics.median(rtf) / base['rtf'] - 1):+.1f} %")
-        print(_line("wall per step", step, "us") + f"  {100 * (statistics.median(step) / base['us_per_step'] - 1):+.1f} %")
+        print(
+            _line("wall per step", step, "us") + f"  {100 * (statistics.median(step) / base['us_per_step'] - 1):+.1f} %"
+        )
         print(_line("peak RSS", [r["peak_rss_mb"] for r in rows], "MB"))
 
 

@@ -35,7 +35,7 @@ def main() -> None:
 
         case = load_case(CASE)
         builds = []
-        for i in range(args.builds):
+        for _ in range(args.builds):
             for f in (Path(tmp) / "cache" / "operators").glob("*.npz") if (Path(tmp) / "cache").exists() else []:
                 f.unlink()
             b = ob.case_operators(case, progress=False)

@@ -30,7 +30,9 @@ def main() -> None:
             for fmu, us in s["timing"]["per_step_us"].items():
                 per_step.setdefault(fmu, []).append(us)
     steps = args.spans * case.samples_per_span
-    print(f"default case, {args.spans} spans = {steps} steps of {case.dt_s * 1e3:.3f} ms, {args.repeats} repeats, MCAP on")
+    print(
+        f"default case, {args.spans} spans = {steps} steps of {case.dt_s * 1e3:.3f} ms, {args.repeats} repeats, MCAP on"
+    )
     print(f"real-time factor: median {statistics.median(rtf):.1f}x (min {min(rtf):.1f}x, max {max(rtf):.1f}x)")
     print(f"wall per step:    median {statistics.median(wall) / steps * 1e6:.1f} us")
     for fmu, values in per_step.items():

@@ -20,7 +20,8 @@ def per_radius_costs() -> None:
     from pantohil.models.hil.loop import HilSettings
     from pantohil.models.pantograph.linear import linear_pantograph
     from pantohil.models.catenary.receptance import asm_operator
-    from pantohil.models.stability.maps import circulant_dense, circulant_range_basis, reduced_span_map, span_map, step_matrix
+    from pantohil.models.stability.maps import (circulant_dense, circulant_range_basis, reduced_span_map, span_map,
+        step_matrix)
     from pantohil.models.stability.step_roots import step_loop, step_spectral_radius
 
     c = load_case(None, [])

@@ -5,7 +5,6 @@ import os
 import subprocess
 import sys
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -78,7 +77,9 @@ def test_osp_system_structure_runs_in_libcosim(ssp, default_run):
         assert ex.step()
         got.append(obs.last_real_values(index, [vr])[0])
     with open(default_run / "run.mcap", "rb") as fh:
-        want = [json.loads(m.data)["contact_force"] for _, _, m in make_reader(fh).iter_messages(topics=["/catenary"])][:1500]
+        want = [json.loads(m.data)["contact_force"] for _, _, m in make_reader(fh).iter_messages(topics=["/catenary"])][
+            :1500
+        ]
     assert np.max(np.abs(np.array(got) - np.array(want))) <= 1e-6
 
 

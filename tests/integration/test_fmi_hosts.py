@@ -36,7 +36,8 @@ def host(tmp_path_factory) -> Path:
     return exe
 
 
-def _plan(fmus: dict[str, Path], into: Path, steps: int, last: int, wrong_step: tuple[str, float] | None = None) -> Path:
+def _plan(fmus: dict[str, Path], into: Path, steps: int, last: int,
+          wrong_step: tuple[str, float] | None = None) -> Path:
     lines, index = [], {}
     for i, name in enumerate(FMU_NAMES):
         folder = into / name
@@ -152,7 +153,9 @@ def test_simulate_fmu_takes_step_and_stop_time_from_the_model_description(tmp_pa
     assert proc.returncode == 0, proc.stdout + proc.stderr
     for name in (*FMU_NAMES, "adapter"):  # the adapter alone: no rig answers, its counters run
         md = read_model_description(str(out / f"{name}.fmu"))
-        assert float(md.defaultExperiment.stepSize) == 0.001 and float(md.defaultExperiment.stopTime) == pytest.approx(0.936)
+        assert float(md.defaultExperiment.stepSize) == 0.001 and float(md.defaultExperiment.stopTime) == pytest.approx(
+            0.936
+        )
         assert md.coSimulation.canHandleVariableCommunicationStepSize is False
         run = subprocess.run([sys.executable, "-c", SIMULATE_ALONE, str(out / f"{name}.fmu")], capture_output=True,
                              text=True, timeout=600)

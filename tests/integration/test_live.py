@@ -40,7 +40,9 @@ def _receive_all(url: str) -> tuple[dict, dict]:
             if msg["op"] == "advertise":
                 channels = {c["id"]: c for c in msg["channels"]}
         subs = {sub_id: ch for sub_id, ch in enumerate(channels.values(), start=1)}
-        ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": s, "channelId": c["id"]} for s, c in subs.items()]}))
+        ws.send(
+            json.dumps({"op": "subscribe", "subscriptions": [{"id": s, "channelId": c["id"]} for s, c in subs.items()]})
+        )
         try:
             for frame in ws:
                 if isinstance(frame, bytes) and frame[0] == MESSAGE_DATA:

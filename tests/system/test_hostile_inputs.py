@@ -104,7 +104,7 @@ CASES = [
     Hostile("case-directory", ("run", "{tmp}", "--out", "{out}"), ("is a directory",)),
     Hostile("case-dev-zero", ("run", "/dev/zero", "--out", "{out}"), ("/dev/zero", "not a regular file")),
     Hostile("case-fifo", ("run", "{tmp}/fifo.toml", "--out", "{out}"), ("not a regular file",)),
-    Hostile("case-not-utf8", RUN, ("not UTF-8",), case="[case]\nname = \"caf\xe9\"\n"),
+    Hostile("case-not-utf8", RUN, ("not UTF-8",), case='[case]\nname = "caf\xe9"\n'),
     Hostile("case-too-large", RUN, ("above the limit", "bytes"), case="#" * (5 << 20)),
     Hostile("case-invalid-toml", RUN, ("not valid TOML",), case="[run\nspeed_kmh = 250\n"),
     Hostile("case-missing", ("run", "{tmp}/nowhere.toml", "--out", "{out}"), ("does not exist",)),
@@ -113,48 +113,68 @@ CASES = [
     _case("case-inf-scalar", ("run.speed_kmh", "finite"), (SPEED, "speed_kmh = inf")),
     _case("case-minus-inf", ("pantograph.contact_stiffness_N_m", "finite"), (KC, "contact_stiffness_N_m = -inf")),
     _case("case-inf-in-list", ("pantograph.masses_kg[0]", "finite"), (MASSES, "masses_kg = [inf, 5.8, 5.8]")),
-    _case("case-nan-in-list", ("profile.dropper_spacing_m[2]", "finite"),
-          (SPACING, "dropper_spacing_m = [6.0, 9.48, nan, 8.32, 8.32, 8.7, 9.48, 6.0]")),
+    _case(
+        "case-nan-in-list",
+        ("profile.dropper_spacing_m[2]", "finite"),
+        (SPACING, "dropper_spacing_m = [6.0, 9.48, nan, 8.32, 8.32, 8.7, 9.48, 6.0]"),
+    ),
     # integers beyond the FMU's xs:int
-    _case("case-seed-above-int32", ("rig.noise_seed", "FMI integer range"),
-          (RIG_DELAY, RIG_DELAY + "noise_seed = 2147483648\n")),
+    _case(
+        "case-seed-above-int32",
+        ("rig.noise_seed", "FMI integer range"),
+        (RIG_DELAY, RIG_DELAY + "noise_seed = 2147483648\n"),
+    ),
     _case("case-ramp-above-int32", ("hil.ramp_steps", "FMI integer range"), (RAMP, "ramp_steps = 1099511627776")),
-    _case("case-int64-min", ("rig.delay_steps", "FMI integer range"),
-          (RIG_DELAY, "delay_steps = -9223372036854775808\n")),
+    _case(
+        "case-int64-min", ("rig.delay_steps", "FMI integer range"), (RIG_DELAY, "delay_steps = -9223372036854775808\n")
+    ),
     # sizes without bound
     _case("case-max-spans-1e9", ("run.max_spans", "[1, 10000]"), (MAX_SPANS, "max_spans = 1000000000")),
     _case("case-dt-1e-7", ("run.dt_s", "[1e-05, 0.1]"), (DT, "dt_s = 1e-7")),
     _case("case-speed-1e-6", ("run.speed_kmh", "[1, 600]"), (SPEED, "speed_kmh = 1e-6")),
     _case("case-samples-per-span", ("samples per span", "100000"), (SPEED, "speed_kmh = 1.0"), (DT, "dt_s = 1e-5")),
-    _case("case-long-list", ("pantograph.masses_kg", "limit of 100"), (MASSES, f"masses_kg = [{', '.join(['1.0'] * 101)}]")),
+    _case(
+        "case-long-list",
+        ("pantograph.masses_kg", "limit of 100"),
+        (MASSES, f"masses_kg = [{', '.join(['1.0'] * 101)}]"),
+    ),
     _case("case-span-1e308", ("catenary.span_m", "[1, 1000]"), (SPAN, "span_m = 1e308")),
     # physical ranges: 1e308 would "converge" with a contact force of 0 N
     _case("case-tension-1e308", ("catenary.tension_N", "(0, 1e+06]"), (TENSION, "tension_N = 1e308")),
-    _case("case-uplift-1e308", ("pantograph.uplift_force_N", "(0, 2000]"),
-          (KC, KC + "\nuplift_force_N = 1e308")),
-    _case("case-contact-stiffness-1e308", ("pantograph.contact_stiffness_N_m", "(0, 1e+08]"),
-          (KC, "contact_stiffness_N_m = 1e308")),
-    _case("case-density-zero", ("catenary.density_kg_m", "(0, 100]"),
-          ("density_kg_m = 1.4735", "density_kg_m = 0.0")),
-    _case("case-relaxation-zero", ("hil.relaxation", "(0, 1]"),
-          ("relaxation = 0.1 ", "relaxation = 0.0 ")),
+    _case("case-uplift-1e308", ("pantograph.uplift_force_N", "(0, 2000]"), (KC, KC + "\nuplift_force_N = 1e308")),
+    _case(
+        "case-contact-stiffness-1e308",
+        ("pantograph.contact_stiffness_N_m", "(0, 1e+08]"),
+        (KC, "contact_stiffness_N_m = 1e308"),
+    ),
+    _case("case-density-zero", ("catenary.density_kg_m", "(0, 100]"), ("density_kg_m = 1.4735", "density_kg_m = 0.0")),
+    _case("case-relaxation-zero", ("hil.relaxation", "(0, 1]"), ("relaxation = 0.1 ", "relaxation = 0.0 ")),
     # negative delay advance is not "automatic": only "auto" is
-    _case("case-hil-delay-negative", ("hil.delay_steps", "auto"),
-          ("delay_compensation = true", "delay_compensation = true\ndelay_steps = -1")),
-    _case("case-uplift-wrong-word", ("pantograph.uplift_force_N", "expected a number"),
-          (KC, KC + '\nuplift_force_N = "automatic"')),
+    _case(
+        "case-hil-delay-negative",
+        ("hil.delay_steps", "auto"),
+        ("delay_compensation = true", "delay_compensation = true\ndelay_steps = -1"),
+    ),
+    _case(
+        "case-uplift-wrong-word",
+        ("pantograph.uplift_force_N", "expected a number"),
+        (KC, KC + '\nuplift_force_N = "automatic"'),
+    ),
     # structure
     Hostile("case-section-scalar", RUN, ("hil", "table"), case=SCALAR_HIL),
     _case("case-unknown-section", ("bogus", "unknown section"), append="[bogus]\nx = 1\n"),
     _case("case-unknown-key", ("run.colour", "unknown key"), (MAX_SPANS, "max_spans = 200\ncolour = 1")),
     _case("case-string-for-number", ("catenary.tension_N", "expected a number"), (TENSION, 'tension_N = "high"')),
     _case("case-bool-for-integer", ("run.max_spans", "integer"), (MAX_SPANS, "max_spans = true")),
-    _case("case-stroke-inverted", ("actuator.stroke_max_m",), append="[actuator]\nstroke_min_m = 0.1\nstroke_max_m = 0.0\n"),
+    _case(
+        "case-stroke-inverted",
+        ("actuator.stroke_max_m",),
+        append="[actuator]\nstroke_min_m = 0.1\nstroke_max_m = 0.0\n",
+    ),
     # --set overrides
     _set("set-newline", "run.speed_kmh=250\nrun.max_spans=1", ("one line",)),
     _set("set-carriage-return", "run.speed_kmh=250\r", ("one line",)),
-    _set("set-into-scalar-section", "hil.relaxation=0.1", ("hil", "not a table"),
-         case=SCALAR_HIL),
+    _set("set-into-scalar-section", "hil.relaxation=0.1", ("hil", "not a table"), case=SCALAR_HIL),
     _set("set-no-equals", "run.speed_kmh", ("section.key=value",)),
     _set("set-no-section", "speed_kmh=250", ("section.key=value",)),
     _set("set-bad-name", "run..speed=1", ("plain names",)),
@@ -175,60 +195,102 @@ CASES = [
     _csv("csv-not-numeric", b"x_m,z0_m\n0,zero\n65,0\n", ("profile file", "numeric")),
     _csv("csv-wrong-columns", b"x,z\n0,0\n65,0\n", ("profile file", "x_m,z0_m")),
     _csv("csv-decreasing", b"x_m,z0_m\n30,0\n10,0\n65,0\n", ("profile file", "increase")),
-    Hostile("csv-dev-zero", RUN, ("/dev/zero", "not a regular file"),
-            case=case_text(('source = "droppers"', 'source = "csv"\ncsv_file = "/dev/zero"'))),
-    Hostile("csv-directory", RUN, ("profile file", "directory"),
-            case=case_text(('source = "droppers"', 'source = "csv"\ncsv_file = "."'))),
+    Hostile(
+        "csv-dev-zero",
+        RUN,
+        ("/dev/zero", "not a regular file"),
+        case=case_text(('source = "droppers"', 'source = "csv"\ncsv_file = "/dev/zero"')),
+    ),
+    Hostile(
+        "csv-directory",
+        RUN,
+        ("profile file", "directory"),
+        case=case_text(('source = "droppers"', 'source = "csv"\ncsv_file = "."')),
+    ),
     # catenary files
     _cat("catenary-tension-1e308", ("contact_wire.tension_N", "physical range"), (CAT_TENSION, "tension_N = 1e308")),
     _cat("catenary-nan", ("contact_wire.tension_N", "finite"), (CAT_TENSION, "tension_N = nan")),
     _cat("catenary-mesh-tiny", ("catenary.mesh_size_m", "limit"), ("mesh_size_m = 0.25", "mesh_size_m = 1e-9")),
-    _cat("catenary-many-droppers", ("catenary.dropper_positions_m", "limit of 100 droppers"),
-         ("dropper_positions_m = [4.5, 10.25, 16.0, 21.75, 27.5, 33.25, 39.0, 44.75, 50.5]",
-          f"dropper_positions_m = [{', '.join(f'{0.01 * (i + 1):.2f}' for i in range(200))}]")),
-    _cat("catenary-missing-section", ("messenger_wire", "missing section"), 
-         ("[messenger_wire]\nlinear_mass_kg_m = 1.08\nbending_stiffness_N_m2 = 131.7\ntension_N = 16000.0\n", "")),
+    _cat(
+        "catenary-many-droppers",
+        ("catenary.dropper_positions_m", "limit of 100 droppers"),
+        (
+            "dropper_positions_m = [4.5, 10.25, 16.0, 21.75, 27.5, 33.25, 39.0, 44.75, 50.5]",
+            f"dropper_positions_m = [{', '.join(f'{0.01 * (i + 1):.2f}' for i in range(200))}]",
+        ),
+    ),
+    _cat(
+        "catenary-missing-section",
+        ("messenger_wire", "missing section"),
+        ("[messenger_wire]\nlinear_mass_kg_m = 1.08\nbending_stiffness_N_m2 = 131.7\ntension_N = 16000.0\n", ""),
+    ),
     Hostile("catenary-binary", ("catenary", "{cat}", "--out", "{out}"), ("catenary file", "binary"), cat="\0\0\0"),
     Hostile("catenary-dev-zero", ("catenary", "/dev/zero", "--out", "{out}"), ("not a regular file",)),
     Hostile("catenary-directory", ("catenary", "{tmp}", "--out", "{out}"), ("is a directory",)),
     Hostile("catenary-in-case-is-binary", RUN, ("catenary.definition_file", "binary"), case=CAT_CASE, cat="\0"),
     # sweep files
-    _sweep("sweep-1e12-points", '[grid]\n"run.speed_kmh" = { start = 200.0, stop = 300.0, num = 1000000000000 }\n',
-           ("run.speed_kmh", "limit of 10000 points")),
-    _sweep("sweep-start-a", '[grid]\n"run.speed_kmh" = { start = "a", stop = 300.0, num = 3 }\n',
-           ("start", "finite number")),
+    _sweep(
+        "sweep-1e12-points",
+        '[grid]\n"run.speed_kmh" = { start = 200.0, stop = 300.0, num = 1000000000000 }\n',
+        ("run.speed_kmh", "limit of 10000 points"),
+    ),
+    _sweep(
+        "sweep-start-a",
+        '[grid]\n"run.speed_kmh" = { start = "a", stop = 300.0, num = 3 }\n',
+        ("start", "finite number"),
+    ),
     _sweep("sweep-stop-nan", '[grid]\n"run.speed_kmh" = { start = 200.0, stop = nan, num = 3 }\n', ("finite",)),
-    _sweep("sweep-grid-product", '[grid]\n"run.speed_kmh" = { start = 200.0, stop = 300.0, num = 1000 }\n'
-                                 '"hil.relaxation" = { start = 0.05, stop = 1.0, num = 1000 }\n',
-           ("1000000 points", "limit")),
+    _sweep(
+        "sweep-grid-product",
+        '[grid]\n"run.speed_kmh" = { start = 200.0, stop = 300.0, num = 1000 }\n'
+        '"hil.relaxation" = { start = 0.05, stop = 1.0, num = 1000 }\n',
+        ("1000000 points", "limit"),
+    ),
     _sweep("sweep-bad-key", '[grid]\n"run.colour" = [1, 2]\n', ("run.colour", "not a case key")),
     _sweep("sweep-bad-point", '[grid]\n"run.speed_kmh" = [200.0, 1e308]\n', ("run.speed_kmh", "range")),
     Hostile("sweep-dev-zero", ("sweep", "/dev/zero", "--out", "{out}"), ("sweep file", "not a regular file")),
-    Hostile("sweep-section-scalar", ("sweep", "{sweep}", "--out", "{out}"), ("[grid]", "table"),
-            sweep="grid = 5\n" + SWEEP_HEAD),
+    Hostile(
+        "sweep-section-scalar",
+        ("sweep", "{sweep}", "--out", "{out}"),
+        ("[grid]", "table"),
+        sweep="grid = 5\n" + SWEEP_HEAD,
+    ),
     # stability grids
     _stab("stability-1e12-points", ("--fmax", "1:2:1000000000000"), ("--fmax", "limit")),
     _stab("stability-letters", ("--fmax", "a:b:3"), ("--fmax", "expected")),
     _stab("stability-nan", ("--fmax", "nan"), ("--fmax", "finite")),
     _stab("stability-inf-stiffness", ("--contact-stiffness", "inf"), ("--contact-stiffness", "finite")),
-    _stab("stability-map-too-large", ("--fmax", "1:20:10000", "--contact-stiffness", "1e4:1e5:10000"),
-          ("stability map", "limit")),
+    _stab(
+        "stability-map-too-large",
+        ("--fmax", "1:20:10000", "--contact-stiffness", "1e4:1e5:10000"),
+        ("stability map", "limit"),
+    ),
     _stab("stability-relaxation-nan", ("--relaxation", "nan"), ("--relaxation", "finite")),
     # command-line values
-    Hostile("fem-sim-spans-huge", ("fem-sim", str(DEFAULT_CASE), "--spans", "1000000000", "--out", "{out}"),
-            ("--spans", "outside")),
-    Hostile("fem-sim-spans-negative", ("fem-sim", str(DEFAULT_CASE), "--spans", "-1", "--out", "{out}"),
-            ("--spans",)),
+    Hostile(
+        "fem-sim-spans-huge",
+        ("fem-sim", str(DEFAULT_CASE), "--spans", "1000000000", "--out", "{out}"),
+        ("--spans", "outside"),
+    ),
+    Hostile("fem-sim-spans-negative", ("fem-sim", str(DEFAULT_CASE), "--spans", "-1", "--out", "{out}"), ("--spans",)),
     Hostile("run-rt-priority", ("run", "--rt-priority", "1000", "--out", "{out}"), ("--rt-priority", "outside")),
     Hostile("run-master-bogus", ("run", "--master", "bogus", "--out", "{out}"), ("--master",)),
     Hostile("emulator-loss-nan", ("rig-emulator", "--listen", "127.0.0.1:0", "--loss", "nan"), ("--loss", "finite")),
-    Hostile("emulator-max-seconds-inf", ("rig-emulator", "--listen", "127.0.0.1:0", "--max-seconds", "inf"),
-            ("--max-seconds", "finite")),
+    Hostile(
+        "emulator-max-seconds-inf",
+        ("rig-emulator", "--listen", "127.0.0.1:0", "--max-seconds", "inf"),
+        ("--max-seconds", "finite"),
+    ),
     Hostile("direct-max-spacing-inf", ("direct", "--max-spacing", "inf", "--out", "{out}"), ("--max-spacing",)),
-    Hostile("direct-second-nan", ("direct", "--second-pantograph-at", "nan", "--out", "{out}"),
-            ("--second-pantograph-at",)),
-    Hostile("sweep-workers-huge", ("sweep", "{sweep}", "--workers", "100000", "--out", "{out}"), ("--workers",),
-            sweep=SWEEP_HEAD + '[grid]\n"run.speed_kmh" = [200.0]\n'),
+    Hostile(
+        "direct-second-nan", ("direct", "--second-pantograph-at", "nan", "--out", "{out}"), ("--second-pantograph-at",)
+    ),
+    Hostile(
+        "sweep-workers-huge",
+        ("sweep", "{sweep}", "--workers", "100000", "--out", "{out}"),
+        ("--workers",),
+        sweep=SWEEP_HEAD + '[grid]\n"run.speed_kmh" = [200.0]\n',
+    ),
 ]
 
 
@@ -256,8 +318,15 @@ def prepare(h: Hostile, tmp: Path) -> list[str]:
 
 def run_hostile(h: Hostile, tmp: Path) -> subprocess.CompletedProcess:
     argv = prepare(h, tmp)
-    return subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", *argv], cwd=tmp, capture_output=True,
-                          text=True, preexec_fn=_limit_memory, timeout=600, env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    return subprocess.run(
+        [sys.executable, "-m", "pantohil.orchestrator.cli", *argv],
+        cwd=tmp,
+        capture_output=True,
+        text=True,
+        preexec_fn=_limit_memory,
+        timeout=600,
+        env={**os.environ, "PYTHONWARNINGS": "ignore"},
+    )
 
 
 def test_there_are_at_least_sixty_distinct_hostile_inputs():

@@ -73,7 +73,7 @@ def test_the_stability_map_predicts_the_linear_pfem_run(pfem_runs, tmp_path):
     proc = pantohil("stability", str(CASES / "pfem_benchmark_250.toml"), "--set", "pfem.droppers=false",
                     "--fmax", "40", "--relaxation", "0.1", "--workers", "1", "--out", str(out), "--quiet")
     assert proc.returncode == 0, proc.stderr
-    rho = float(open(out / "stability.csv").read().splitlines()[1].split(",")[-1])
+    rho = float((out / "stability.csv").read_text().splitlines()[1].split(",")[-1])
     s, _ = load_run(pfem_runs["linear"])
     change = [h["change"] for h in s["convergence"]]
     rate = (change[-1] / change[-11]) ** (1 / 10)
@@ -102,8 +102,22 @@ def test_a_corrupt_cached_operator_file_gives_one_line(pfem_runs, tmp_path):
     import subprocess
     import sys
 
-    proc = subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", "run", str(CASES / "pfem_benchmark_250.toml"),
-                           "--out", str(tmp_path / "run"), "--quiet"], capture_output=True, text=True, env=env, timeout=600)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pantohil.orchestrator.cli",
+            "run",
+            str(CASES / "pfem_benchmark_250.toml"),
+            "--out",
+            str(tmp_path / "run"),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "corrupt or truncated" in lines[0], proc.stderr

@@ -24,7 +24,8 @@ def _predict(tmp_path, i, update, fmax, kc, latency, mu):
     proc = pantohil("stability", "--update", update, "--fmax", str(fmax), "--contact-stiffness", str(kc),
                     "--delay", str(latency), "--relaxation", str(mu), "--workers", "1", "--out", str(out), "--quiet")
     assert proc.returncode == 0, proc.stderr
-    rows = list(csv.DictReader(open(out / "stability.csv")))
+    with open(out / "stability.csv") as fh:
+        rows = list(csv.DictReader(fh))
     assert len(rows) == 1
     return float(rows[0]["spectral_radius"])
 
@@ -47,7 +48,7 @@ def test_predictions_meet_the_virtual_hil_runs(tmp_path):
         rho = list(pool.map(lambda a: _predict(tmp_path, a[0], *a[1]), enumerate(POINTS)))
         runs = list(pool.map(lambda a: _simulate(tmp_path, a[0], *a[1]), enumerate(POINTS)))
     table = []
-    for p, r, s in zip(POINTS, rho, runs):
+    for p, r, s in zip(POINTS, rho, runs, strict=False):
         table.append((p, round(r, 4), s["status"], s["spans"]))
         assert r < 0.95 or r > 1.05, p
         if r < 0.95:
@@ -57,7 +58,7 @@ def test_predictions_meet_the_virtual_hil_runs(tmp_path):
             assert rate == pytest.approx(r, rel=0.05), (p, r, rate)
         else:
             assert s["diverged"] and s["spans"] < 150, (p, r, s["message"])
-    for p, r, s in zip(POINTS, rho, runs):
+    for p, r, s in zip(POINTS, rho, runs, strict=False):
         if r < 0.95:  # spans to converge: from the first span whose change is below 0.01, shrinking by rho per span
             change = [h["change"] for h in s["convergence"]]
             first = next(i for i, c in enumerate(change) if c is not None and c < 0.01)

@@ -2,7 +2,6 @@
 scheduler and worker, interrupted and resumed; bad sweep input."""
 import csv
 import json
-import os
 import signal
 import socket
 import subprocess

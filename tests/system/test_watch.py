@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,9 +21,18 @@ GROUPS = {"/catenary": {"force_at_sample": "force [N]"}}
 def _span(writer: McapWriter, span: int, n: int = 50) -> None:
     t = (span * n + np.arange(n)) * 1e-3
     writer.write_block("/catenary", t, (100.0 + span + np.sin(t))[:, None])
-    writer.write_event("/convergence", (span + 1) * n * 1e-3, {"span": span, "change": 1.0 / (span + 1),
-                                                               "mean_N": 100.0 + span, "std_N": 0.7, "max_N": 101.0 + span,
-                                                               "min_N": 99.0 + span})
+    writer.write_event(
+        "/convergence",
+        (span + 1) * n * 1e-3,
+        {
+            "span": span,
+            "change": 1.0 / (span + 1),
+            "mean_N": 100.0 + span,
+            "std_N": 0.7,
+            "max_N": 101.0 + span,
+            "min_N": 99.0 + span,
+        },
+    )
     writer.flush()
 
 

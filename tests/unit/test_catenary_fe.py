@@ -97,7 +97,11 @@ def test_paper_a_asm_fit(paper_a):
     # the edges of the periodic structure's stop bands (Bragg dispersion the string cannot have)
     p = AsmParameters(paper_a.contact_tension_N, fits[(10.0, 40.0)], paper_a.support_stiffness_N_m2,
                       paper_a.alpha_1_s, paper_a.beta_s)
-    dev = np.array([lam / wavelength_at_rest(p, 2 * np.pi * f) - 1
-                    for f, lam, ok in zip(paper_a.wave_frequencies_hz, paper_a.wavelengths_m, paper_a.propagating)
-                    if ok and f >= 10])
+    dev = np.array(
+        [
+            lam / wavelength_at_rest(p, 2 * np.pi * f) - 1
+            for f, lam, ok in zip(paper_a.wave_frequencies_hz, paper_a.wavelengths_m, paper_a.propagating, strict=False)
+            if ok and f >= 10
+        ]
+    )
     assert len(dev) > 100 and np.sqrt(np.mean(dev**2)) < 0.025 and np.max(np.abs(dev)) < 0.07

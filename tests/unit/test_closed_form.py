@@ -6,8 +6,13 @@ import pytest
 
 from pantohil.models.catenary.asm.string import receptance_behind, receptance_direct
 from pantohil.models.case import load_case
-from pantohil.models.catenary.asm.closed_form import (one_sided_harmonics, optimal_spacings, single_pantograph, synthesize,
-                                         two_pantographs)
+from pantohil.models.catenary.asm.closed_form import (
+    one_sided_harmonics,
+    optimal_spacings,
+    single_pantograph,
+    synthesize,
+    two_pantographs,
+)
 
 
 @pytest.fixture(scope="module")

@@ -57,7 +57,7 @@ def test_limiter_never_exceeds_the_limits():
     dt = 1e-3
     rng = random.Random(3)
     limiter = Limiter(lim, dt)
-    z, prev_v = [], 0.0
+    z = []
     for k in range(20000):
         wanted = 0.2 * math.sin(k * 0.01) + (rng.random() - 0.5) * (0.3 if k % 500 < 20 else 0.0)
         zk, vk = limiter(wanted)

@@ -48,7 +48,9 @@ def appendix():
 
 
 def test_appendix_frf_receptance_and_operator_to_printed_digits(appendix):
-    h = np.array(appendix["frf_w3000_first_column_m_per_N"]["re"]) + 1j * np.array(appendix["frf_w3000_first_column_m_per_N"]["im"])
+    h = np.array(appendix["frf_w3000_first_column_m_per_N"]["re"]) + 1j * np.array(
+        appendix["frf_w3000_first_column_m_per_N"]["im"]
+    )
     half_digit = 0.5e-4 * 1e-4 + 1e-12
     assert np.max(np.abs(h.real - H3000_COL1.real * 1e-4)) <= half_digit
     assert np.max(np.abs(h.imag - H3000_COL1.imag * 1e-4)) <= half_digit

@@ -32,7 +32,9 @@ def test_the_block_begins_on_a_contact_sample_and_holds_the_whole_stitch(stitche
     assert cb.origin_m + cat.span_m > cat.span_m + cat.stitch_length_m / 2
     assert min(abs(cb.origin_m - x) for x in cat.dropper_positions_m) > 2.0  # far from every dropper
     assert cb.n_droppers == len(cat.dropper_positions_m)
-    assert block_origin_m(load_definition(ROOT / "models" / "data" / "catenaries" / "benchmark_simple.toml"), 792) == 0.0
+    assert (
+        block_origin_m(load_definition(ROOT / "models" / "data" / "catenaries" / "benchmark_simple.toml"), 792) == 0.0
+    )
 
 
 def test_the_block_reproduces_the_fe_vertical_stiffness_along_the_span(stitched):

@@ -8,8 +8,14 @@ from pantohil.models.hil.loop import HilSettings
 from pantohil.models.pantograph.linear import linear_pantograph
 from pantohil.models.pantograph.lumped import PantographParameters, RigidMass
 from pantohil.models.catenary.receptance import asm_operator, harmonic_count
-from pantohil.models.stability.maps import (circulant_dense, circulant_range_basis, range_basis, reduced_span_map, span_map,
-                                       step_matrix)
+from pantohil.models.stability.maps import (
+    circulant_dense,
+    circulant_range_basis,
+    range_basis,
+    reduced_span_map,
+    span_map,
+    step_matrix,
+)
 from pantohil.models.stability.map_point import RELAXATION_GRID, best_relaxation, problem_for, with_contact_stiffness
 from pantohil.models.stability.step_roots import step_loop, step_spectral_radius
 from test_hil_loop import run_loop

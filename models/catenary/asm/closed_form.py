@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pantohil.models.catenary.asm.string import AsmParameters, characteristic_coefficients, poles, receptance_ahead, receptance_behind, receptance_direct
+from pantohil.models.catenary.asm.string import (AsmParameters, characteristic_coefficients, poles, receptance_ahead,
+    receptance_behind, receptance_direct)
 from pantohil.models.pantograph.lumped import PantographParameters
 
 

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.catenary.asm.string import AsmParameters
-from pantohil.models.catenary.fe.asm_fit import attenuation, dominant_wavelength, fit_density, is_propagating, support_stiffness_from
+from pantohil.models.catenary.fe.asm_fit import (attenuation, dominant_wavelength, fit_density, is_propagating,
+    support_stiffness_from)
 from pantohil.models.catenary.fe.definition import CatenaryDefinition, load_definition
 from pantohil.models.catenary.asm.closed_form import one_sided_harmonics
 from pantohil.models.catenary.fe.model import contact_wire_profile, form_find, harmonic_responses, vertical_stiffness
@@ -105,7 +106,8 @@ def analyse(cat: CatenaryDefinition, settings: AnalysisSettings | None = None) -
     kbar = support_stiffness_from(float(np.mean(kz)), cat.contact.tension_N)
     guess = AsmParameters(cat.contact.tension_N, cat.contact.mass_kg_m, kbar, cat.alpha_1_s, cat.beta_s)
     waves, moving = [], []
-    for f, u in zip(s.wave_frequencies_hz, harmonic_responses(fw, 2 * np.pi * np.array(s.wave_frequencies_hz), x_load)):
+    responses = harmonic_responses(fw, 2 * np.pi * np.array(s.wave_frequencies_hz), x_load)
+    for f, u in zip(s.wave_frequencies_hz, responses, strict=False):
         waves.append(dominant_wavelength(fw.section.x, u, x_load, L))
         moving.append(is_propagating(attenuation(fw.section.x, u, x_load, L), guess, 2 * np.pi * f))
     freqs, waves_a, ok = np.array(s.wave_frequencies_hz), np.array(waves), np.array(moving)

@@ -171,13 +171,15 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
         if any(v <= 0 for v in spacing):
             raise CatenaryError("catenary.dropper_spacing_m: overlapping droppers (an interval <= 0)")
         if abs(sum(spacing) - span) > 1e-6 * span:
-            raise CatenaryError(f"catenary.dropper_spacing_m: intervals sum to {sum(spacing):g} m, not the span {span:g} m")
+            raise CatenaryError(
+                f"catenary.dropper_spacing_m: intervals sum to {sum(spacing):g} m, not the span {span:g} m"
+            )
         positions = tuple(float(v) for v in np.cumsum(spacing)[:-1])
     elif "dropper_positions_m" in c:
         positions = tuple(_number_list(c, "dropper_positions_m", 1))
         if any(p <= 0 or p >= span for p in positions):
             raise CatenaryError(f"catenary.dropper_positions_m: a dropper outside the span (0, {span:g}) m")
-        if any(b <= a for a, b in zip(positions, positions[1:])):
+        if any(b <= a for a, b in zip(positions, positions[1:], strict=False)):
             raise CatenaryError("catenary.dropper_positions_m: overlapping droppers (positions must increase)")
     else:
         raise CatenaryError("catenary.dropper_spacing_m: missing (or give dropper_positions_m)")
@@ -186,7 +188,9 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
         dmass = _num(d, "droppers", "linear_mass_kg_m", positive=True)
     else:
         dmass = _num(d, "droppers", "density_kg_m3", positive=True) * _num(d, "droppers", "area_m2", positive=True)
-    ea = _num(d, "droppers", "youngs_modulus_Pa", 1.1e11, positive=True) * _num(d, "droppers", "area_m2", 10e-6, positive=True)
+    ea = _num(d, "droppers", "youngs_modulus_Pa", 1.1e11, positive=True) * _num(
+        d, "droppers", "area_m2", 10e-6, positive=True
+    )
     stitch, stitch_len = None, 0.0
     if "stitch_wire" in raw:
         stitch = _wire(raw, "stitch_wire")

@@ -47,7 +47,7 @@ def _grid(cat: CatenaryDefinition, n_spans: int, extra_keys: tuple = ()) -> np.n
     keys = np.unique(np.round(keys, 9))
     pts = []
     for j in range(n_spans):
-        for a, b in zip(keys, [*keys[1:], L]):
+        for a, b in zip(keys, [*keys[1:], L], strict=False):
             k = max(1, int(np.ceil((b - a) / cat.mesh_size_m - 1e-9)))
             pts.extend(j * L + a + (b - a) * np.arange(k) / k)
     pts.append(n_spans * L)
@@ -121,7 +121,7 @@ def build_section(cat: CatenaryDefinition, n_spans: int, extra_keys: tuple = (),
 
     add_chain(x, cw, cat.contact)
     add_chain(x, mw, cat.messenger)
-    for xs, wd in zip(stitch_x, stitch_w):
+    for xs, wd in zip(stitch_x, stitch_w, strict=False):
         add_chain(xs, wd, cat.stitch)
     K = sparse.csr_matrix((kv, (rows, cols)), shape=(ndof, ndof))
     M = sparse.csr_matrix((mv, (rows, cols)), shape=(ndof, ndof))
@@ -220,7 +220,7 @@ def form_find(cat: CatenaryDefinition, n_spans: int = 3) -> FormFinding:
     # linearised stiffness: droppers as bars, steady arms as springs, messenger supports
     kd = cat.dropper_axial_stiffness_N / np.maximum(lengths, 1e-6)
     extra_r, extra_c, extra_v = [], [], []
-    for a, b, k in zip(d_cw, d_up, kd):
+    for a, b, k in zip(d_cw, d_up, kd, strict=False):
         extra_r += [a, a, b, b]
         extra_c += [a, b, a, b]
         extra_v += [k, -k, -k, k]

@@ -70,7 +70,7 @@ class _UnitResponses:
 
     def combination(self, row: sparse.csr_matrix) -> np.ndarray:
         out = np.zeros(row.shape[1])
-        for j, w in zip(row.indices, row.data):
+        for j, w in zip(row.indices, row.data, strict=False):
             if j not in self.cache:
                 if len(self.cache) >= self.keep:
                     self.cache.pop(next(iter(self.cache)))
@@ -103,8 +103,9 @@ class SectionModel:
 
 
 def simulate_section(cat: CatenaryDefinition, pan: PantographParameters, n_spans: int, speed_m_s: float,
-                     dt_s: float, droppers_slacken: bool = True, hht: HhtConstants = HhtConstants(),
-                     progress=None, absorbing_ends: bool = True, reference_height_m: float | None = None) -> FeSimResult:
+                     dt_s: float, droppers_slacken: bool = True, hht: HhtConstants | None = None,
+                     progress=None, absorbing_ends: bool = True,
+                     reference_height_m: float | None = None) -> FeSimResult:
     """Run the pantograph over an n-span section (Paper C sec. 6's conventional reference).
 
     With `absorbing_ends`, the contact wire's end heights are held by dashpots of the wire's impedance
@@ -141,7 +142,7 @@ def simulate_section(cat: CatenaryDefinition, pan: PantographParameters, n_spans
 
 
 def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: float, droppers_slacken: bool = True,
-                      hht: HhtConstants = HhtConstants(), progress=None,
+                      hht: HhtConstants | None = None, progress=None,
                       reference_height_m: float | None = None) -> FeSimResult:
     """HHT time integration of a section with the pantograph in penalty contact and slackening droppers."""
     t0 = time.perf_counter()
@@ -151,6 +152,7 @@ def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: floa
     if dash is not None:
         C = (C + sparse.diags(dash)).tocsr()
     nf = K.shape[0]
+    hht = hht if hht is not None else HhtConstants()
     a, b, g, dt = hht.alpha, hht.beta, hht.gamma, dt_s
     solver = _Banded((M + (1 + a) * (g * dt * C + b * dt * dt * K)).tocsr())
     unit = _UnitResponses(solver)

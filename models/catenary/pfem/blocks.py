@@ -30,7 +30,9 @@ def hermite_shapes(nodes_x: np.ndarray, x: np.ndarray, ndof: int, w_dof: np.ndar
     e = np.clip(np.searchsorted(nodes_x, x, side="right") - 1, 0, len(nodes_x) - 2)
     h = nodes_x[e + 1] - nodes_x[e]
     s = (x - nodes_x[e]) / h
-    vals = np.stack([1 - 3 * s**2 + 2 * s**3, h * (s - 2 * s**2 + s**3), 3 * s**2 - 2 * s**3, h * (-s**2 + s**3)], axis=1)
+    vals = np.stack(
+        [1 - 3 * s**2 + 2 * s**3, h * (s - 2 * s**2 + s**3), 3 * s**2 - 2 * s**3, h * (-(s**2) + s**3)], axis=1
+    )
     cols = np.stack([w_dof[e], w_dof[e] + 1, w_dof[e + 1], w_dof[e + 1] + 1], axis=1)
     rows = np.repeat(np.arange(len(x)), 4)
     return sparse.csr_matrix((vals.ravel(), (rows, cols.ravel())), shape=(len(x), ndof))
@@ -59,8 +61,10 @@ class ContactBlock:
         Paper C eqs. 26, 31)."""
         n, nd = self.block.ndof, self.n_droppers
         r = np.arange(nd)
-        elong = sparse.csr_matrix((np.r_[np.ones(nd), -np.ones(nd)], (np.r_[r, r], np.r_[self.dropper_upper, self.dropper_lower])),
-                                  shape=(nd, n))
+        elong = sparse.csr_matrix(
+            (np.r_[np.ones(nd), -np.ones(nd)], (np.r_[r, r], np.r_[self.dropper_upper, self.dropper_lower])),
+            shape=(nd, n),
+        )
         return elong, -elong
 
 
@@ -118,7 +122,7 @@ def catenary_block(cat: CatenaryDefinition) -> ContactBlock:
     g = [d[1] for d in sec.droppers]
     up = [d[2] for d in sec.droppers]
     r, c, v = [], [], []
-    for a, b, k in zip(g, up, kd):
+    for a, b, k in zip(g, up, kd, strict=False):
         r += [a, a, b, b]
         c += [a, b, a, b]
         v += [k, -k, -k, k]
@@ -150,7 +154,7 @@ def catenary_block(cat: CatenaryDefinition) -> ContactBlock:
     C = cat.alpha_1_s * M + cat.beta_s * K
     left = [cw0, cw0 + 1, mw0, mw0 + 1]
     right = [cwN, cwN + 1, mwN, mwN + 1]
-    pairs = [(new[a], new[b]) for a, b in zip(left, right) if keep[a]]
+    pairs = [(new[a], new[b]) for a, b in zip(left, right, strict=False) if keep[a]]
     blk = PeriodicBlock(M, K, C, [p[0] for p in pairs], [p[1] for p in pairs], cat.span_m, cat.alpha_1_s, cat.beta_s)
     nodes = sec.x
     w_dof = new[sec.cw_w]

@@ -108,7 +108,7 @@ def graded_grid(alpha: float, beta: float, omega_max: float, resolution: float =
 def direct_frf(block: PeriodicBlock, omega: float, period_s: float) -> np.ndarray:
     """H(w) of Paper C eqs. (10)-(14): displacements of every dof (rows in dof order) per unit nodal
     force on the inner and right dofs (columns: inner dofs, then right dofs), the F_R column halved."""
-    L, I, R = block.left, block.inner, block.right
+    L, I, R = block.left, block.inner, block.right  # noqa: E741 (Paper C's left, inner, right dofs)
     nI, nR = len(I), len(R)
     D = block.K + 1j * omega * block.C - omega**2 * block.M
     e = np.exp(1j * omega * period_s)
@@ -148,7 +148,7 @@ def direct_operator(block: PeriodicBlock, Nc: np.ndarray, dt_s: float, omega: np
     lag = (np.arange(n)[:, None] - np.arange(n)[None, :]) * dt_s
     w = transform_weights(omega, dt_s)
     out = np.zeros((n, n))
-    for wk, ok in zip(w, omega):
+    for wk, ok in zip(w, omega, strict=False):
         out += wk * np.real(direct_receptance(block, ok, T, Nc, Nc) * np.exp(1j * ok * lag))
     return out
 
@@ -178,9 +178,9 @@ class FixedInterfaceModel:
     n_right: int
 
     @classmethod
-    def build(cls, block: PeriodicBlock, period_s: float) -> "FixedInterfaceModel":
+    def build(cls, block: PeriodicBlock, period_s: float) -> FixedInterfaceModel:
         B = np.concatenate([block.left, block.right])
-        I = block.inner
+        I = block.inner  # noqa: E741 (Paper C's inner dofs)
         K, M = block.K, block.M
         extra = block.C - block.alpha * M - block.beta * K
         inner_extra = np.abs(extra[np.ix_(I, np.arange(block.ndof))]).max(initial=0.0)

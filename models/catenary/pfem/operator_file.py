@@ -49,7 +49,9 @@ def load_operators(path: Path, key: str | None = None) -> PfemOperators:
             names = set(z.files)
             missing = sorted({"meta", *_ARRAYS} - names)
             if missing:
-                raise OperatorFileError(f"operator file {path}: missing {', '.join(missing)} (not a pantohil operator file?)")
+                raise OperatorFileError(
+                    f"operator file {path}: missing {', '.join(missing)} (not a pantohil operator file?)"
+                )
             meta = json.loads(str(z["meta"]))
             arrays = {name: z[name] for name in _ARRAYS}
     except OperatorFileError:
@@ -77,7 +79,16 @@ def load_operators(path: Path, key: str | None = None) -> PfemOperators:
                                     f"for N = {n}, {nd} droppers, N_hd = {jd}")
     if not all(np.all(np.isfinite(arrays[k])) for k in ("cc", "dc", "cd", "dd", "z0")):
         raise OperatorFileError(f"operator file {path}: non-finite values")
-    return PfemOperators(settings, np.ascontiguousarray(arrays["cc"], dtype=float), arrays["dc"].astype(complex),
-                         np.ascontiguousarray(arrays["cd"], dtype=float), arrays["dd"].astype(complex), arrays["z0"],
-                         arrays["window_start"].astype(int), arrays["dropper_tension_N"],
-                         arrays["dropper_stiffness_N_m"], arrays["dropper_x_m"], {**meta.get("info", {}), "key": meta["key"]})
+    return PfemOperators(
+        settings,
+        np.ascontiguousarray(arrays["cc"], dtype=float),
+        arrays["dc"].astype(complex),
+        np.ascontiguousarray(arrays["cd"], dtype=float),
+        arrays["dd"].astype(complex),
+        arrays["z0"],
+        arrays["window_start"].astype(int),
+        arrays["dropper_tension_N"],
+        arrays["dropper_stiffness_N_m"],
+        arrays["dropper_x_m"],
+        {**meta.get("info", {}), "key": meta["key"]},
+    )

@@ -170,7 +170,9 @@ def build_operators(cb: ContactBlock, s: PfemSettings, progress=None, chunk: int
         c, dp, S, P = fim.coefficients(om)
         B = np.exp(1j * np.outer(om, lags * dt))  # [k, lag]
         G += np.real((wk[:, None] / dp).T @ B)
-        Q = np.ascontiguousarray(((c[:, None] / dp)[:, :, None] * fim.M_qB[None]).transpose(1, 0, 2).reshape(r, kc * nB))
+        Q = np.ascontiguousarray(
+            ((c[:, None] / dp)[:, :, None] * fim.M_qB[None]).transpose(1, 0, 2).reshape(r, kc * nB)
+        )
         Xi_c = psi_c[:, None, :] - _real_times_complex(phi_c, Q).reshape(n, kc, nB)  # [n, k, B]
         ph = B[:, lag0:lag0 + n].T  # exp(i w_k n dt) [n, k]
         A_c = (E_c @ (ph[:, :, None] * Xi_c).reshape(n, kc * nB)).reshape(rows_c, kc, nB)
