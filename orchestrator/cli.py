@@ -80,6 +80,8 @@ def _add_run_command(sub) -> None:
                           "127.0.0.1:8765; port 0 picks a free one); open docs/foxglove/pantohil-layout.json")
     run.add_argument("--live-wait", action="store_true",
                      help="with --live: start stepping once a viewer has subscribed to a channel")
+    run.add_argument("--resume", type=Path, metavar="RUN_FOLDER",
+                     help="continue an interrupted run from the last span it saved (its case, overrides and FMUs)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -253,11 +255,29 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _resume_case(args):
+    """The case and checkpoint of `run --resume RUN_FOLDER`; the run folder fixes everything else."""
+    from pantohil.orchestrator import checkpoint
+
+    given = [flag for flag, value in (("a case file", args.case), ("--set", args.overrides), ("--out", args.out),
+                                      ("--hardware", args.hardware), ("--master libcosim", args.master != "fmpy"))
+             if value]
+    if given:
+        raise CaseError(f"--resume: continues RUN_FOLDER with its own case and FMUs; remove {', '.join(given)}")
+    state = checkpoint.load(args.resume)
+    meta = state["meta"]
+    return load_case(Path(meta["case_file"]), meta["overrides"]), state
+
+
 def _cmd_run(args) -> int:
     from pantohil.orchestrator.hil_run import run_case
 
     system = None
-    if args.case is not None and args.case.suffix == ".ssp":
+    resume = None
+    if args.resume is not None:
+        case, resume = _resume_case(args)
+        args.out = args.resume
+    elif args.case is not None and args.case.suffix == ".ssp":
         from pantohil.builder.ssp import SspError, read_ssp, temporary_dir
 
         if any(not o.startswith("run.") for o in args.overrides):
@@ -271,6 +291,11 @@ def _cmd_run(args) -> int:
         case = load_case(system["case_file"], args.overrides)
     else:
         case = load_case(args.case, args.overrides)
+    checkpoint_info = None  # an SSP run saves no checkpoint: its system lives in a temporary folder
+    if resume is not None:
+        checkpoint_info = {k: resume["meta"][k] for k in ("case_file", "overrides")}
+    elif system is None:
+        checkpoint_info = {"case_file": str(Path(case.source).resolve()), "overrides": list(args.overrides)}
     hardware = None
     if args.hardware is not None:
         from pantohil.fmus.udp_protocol import parse_endpoint
@@ -290,7 +315,7 @@ def _cmd_run(args) -> int:
     out = args.out or Path("runs") / f"{case.name}-{datetime.now():%Y%m%d-%H%M%S}"
     result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system,
                       hardware=hardware, realtime=args.realtime, rt_priority=args.rt_priority, live=live,
-                      live_wait=args.live_wait)
+                      live_wait=args.live_wait, checkpoint_info=checkpoint_info, resume=resume)
     cf = result.get("contact_force", {})
     print(f"{result['status']}: {result['message']}")
     if cf:

@@ -83,6 +83,22 @@ class FmuInstance:
             raise ValueError(f"a port takes variables of one type, got {kinds}")
         return Port(self, kinds.pop(), names)
 
+    def serialize_state(self) -> bytes:
+        """The FMU's whole state, serialized (fmi2GetFMUstate + fmi2SerializeFMUstate)."""
+        state = self.slave.getFMUstate()
+        try:
+            return bytes(self.slave.serializeFMUstate(state))
+        finally:
+            self.slave.freeFMUstate(state)
+
+    def deserialize_state(self, data: bytes) -> None:
+        """Put back a state serialized by an instance of the same FMU (fmi2DeSerializeFMUstate + fmi2SetFMUstate)."""
+        state = self.slave.deSerializeFMUstate(data)
+        try:
+            self.slave.setFMUstate(state)
+        finally:
+            self.slave.freeFMUstate(state)
+
     def do_step(self, t: float, dt: float) -> None:
         self.check(self._do_step(self.component, t, dt, 1), f"doStep at t={t:.6f} s")
 

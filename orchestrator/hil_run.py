@@ -24,7 +24,7 @@ from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, single
 from pantohil.models.hil.loop import ConvergenceMonitor
 from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
 
-from . import report
+from . import checkpoint, report
 from .channels import span_force_record
 from .master import JacobiMaster
 from .pacing import Pacer, set_realtime_priority
@@ -121,10 +121,12 @@ def closed_form_reference(case: Case) -> np.ndarray:
 def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str = "fmpy",
              system: dict | None = None, hardware: tuple[str, int] | None = None,
              realtime: bool = False, rt_priority: int | None = 50, live: tuple[str, int] | None = None,
-             live_wait: bool = False) -> RunResult:
+             live_wait: bool = False, checkpoint_info: dict | None = None, resume: dict | None = None) -> RunResult:
     """Run a case. `system` (fmus, connections, parameters), e.g. from an SSP file, replaces the build;
     `hardware` (host, port) runs against a rig controller through the adapter FMU; `live` (host, port)
-    serves the run's channels to Foxglove while it runs (`live_wait`: from a viewer's first subscription on)."""
+    serves the run's channels to Foxglove while it runs (`live_wait`: from a viewer's first subscription on).
+    `checkpoint_info` (case file, overrides): save the state every span (virtual HIL, fmpy master);
+    `resume` (checkpoint.load of an interrupted run in out_dir): continue from its last saved span."""
     if master_kind not in MASTERS:
         raise CaseError(f"--master: must be one of {', '.join(MASTERS)} (got {master_kind!r})")
     if hardware is not None and (system is not None or master_kind != "fmpy"):
@@ -159,7 +161,10 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     pacing_group = {"/master": {"lateness_us": "start of the step after its slot start [us]",
                                 "duration_us": "wall time of the step [us]"}} if realtime else {}
     groups = topology.groups | pacing_group
-    recorder = McapRecorder(out_dir / "run.mcap", groups,
+    saving = checkpoint_info is not None and master_kind == "fmpy" and topology is VIRTUAL and system is None
+    first_span = 0 if resume is None else resume["meta"]["span"] + 1
+    log_name = "run.mcap" if resume is None else f"run_from_span_{first_span:04d}.mcap"  # the first log stays
+    recorder = McapRecorder(out_dir / log_name, groups,
                             {"case": case.name, "dt_s": dt, "samples_per_span": n, "master": master_kind,
                              "topology": topology.name, "realtime": realtime})
     try:
@@ -178,6 +183,14 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
         recorder.close()
         raise
     monitor = ConvergenceMonitor(n)
+    if resume is not None:
+        try:
+            checkpoint.restore(resume, master, monitor, fmus)
+        except Exception:
+            recorder.close()
+            master.close()
+            raise
+    info = {**checkpoint_info, "fmu_digests": checkpoint.fmu_digests(fmus)} if saving else None
     pacer = Pacer(dt, capacity) if realtime else None
     master.pacer = pacer
     scheduling = set_realtime_priority(rt_priority) if realtime else "normal"  # after the logger is forked
@@ -186,7 +199,8 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     cat = master.real_outputs["catenary"]
     i_z, i_f = cat.index("height_command"), cat.index("force_at_sample")
     link_col = master.int_outputs["adapter"].index("link_state") if hardware is not None else None
-    bar = tqdm(total=run["max_spans"], unit="span", disable=None if progress else True, leave=False, desc=case.name)
+    bar = tqdm(total=run["max_spans"], initial=first_span, unit="span", disable=None if progress else True, leave=False,
+               desc=case.name)
     t_start = time.perf_counter()
     try:
         if publisher is not None and live_wait:
@@ -197,7 +211,7 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
             raise _Stop("link_lost", f"the rig at {hardware[0]}:{hardware[1]} did not answer the session start")
         if pacer is not None:
             pacer.start()
-        for span in range(run["max_spans"]):
+        for span in range(first_span, run["max_spans"]):
             for _ in range(n):
                 k = master.k
                 if pacer is not None:
@@ -223,6 +237,8 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
             recorder.write_event("/span_force", (start + n) * dt, span_force_record(span, dt, force, previous))
             if publisher is not None:
                 publisher.span_closed((start + n) * dt, rec, force, previous)
+            if saving:
+                checkpoint.save(out_dir, master, monitor, span, info)
             bar.update(1)
             bar.set_postfix(change=f"{rec['change']:.2e}", mean=f"{rec['mean_N']:.1f}", std=f"{rec['std_N']:.2f}")
             if start >= case.ramp_steps and span >= 2 and rec["change"] <= run["convergence_tol"]:
@@ -251,6 +267,8 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
         per_step = master.per_step_us()
         master.close()
     extra = {"topology": topology.name}
+    if resume is not None:
+        extra["resumed_from_span"] = first_span
     if publisher is not None:
         extra["live"] = publisher.summary()
     if operators is not None:
@@ -395,7 +413,7 @@ def _finish(case, out_dir, master, monitor, plan, fmus, status, message, wall, b
                                             f"{case.name}: dropper correction forces, converged span")
         report.write_steady_span(out_dir / "steady_span.csv", np.arange(n) * dt, z0, z, f)
         overlay = [master.column("catenary", "force_at_sample", s * n, (s + 1) * n)
-                   for s in range(max(0, spans_done - 10), spans_done)]
+                   for s in range(max(master.record_start // n, spans_done - 10), spans_done)]
         report.plot_contact_force(out_dir / "contact_force.png", dt, overlay, ref, filtered,
                                   f"{case.name}: {case.speed_kmh:.0f} km/h, {status} after {spans_done} spans")
     if monitor.history:

@@ -44,8 +44,11 @@ class RecordingMaster:
         j = self._in_map[fmu].index((src, self.real_outputs[src].index(output)))
         return self.record_in[fmu][start:stop, j]
 
+    record_start = 0  # first step recorded (a resumed run records from its checkpoint's span on)
+
     def per_step_us(self) -> dict[str, float]:
-        return {n: float(np.median(self.step_ns[n][: self.k])) / 1000.0 for n in self.step_ns} if self.k else {}
+        steps = slice(self.record_start, self.k)
+        return {n: float(np.median(self.step_ns[n][steps])) / 1000.0 for n in self.step_ns} if self.k > self.record_start else {}
 
 
 class JacobiMaster(RecordingMaster):
@@ -101,6 +104,13 @@ class JacobiMaster(RecordingMaster):
             rec[k] = out
         self.values = new_values
         self.k = k + 1
+
+    def serialize_states(self) -> dict[str, bytes]:
+        return {n: inst.serialize_state() for n, inst in self.instances.items()}
+
+    def deserialize_states(self, states: dict[str, bytes]) -> None:
+        for n, inst in self.instances.items():
+            inst.deserialize_state(states[n])
 
     def close(self) -> None:
         for inst in self.instances.values():
