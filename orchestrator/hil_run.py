@@ -7,6 +7,7 @@ hardware HIL (catenary <-> adapter FMU <-UDP-> rig controller or the rig emulato
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
@@ -29,7 +30,7 @@ from .channels import span_force_record
 from .master import JacobiMaster
 from .pacing import Pacer, set_realtime_priority
 from .recorder import McapRecorder
-import contextlib
+from .stop_signals import StopRequests
 
 MASTERS = ("fmpy", "libcosim")
 LINK_FAULT = 2
@@ -202,6 +203,7 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     bar = tqdm(total=run["max_spans"], initial=first_span, unit="span", disable=None if progress else True, leave=False,
                desc=case.name)
     t_start = time.perf_counter()
+    stops = StopRequests()
     try:
         if publisher is not None and live_wait:
             print("live: waiting for a viewer to subscribe (Ctrl-C to stop)", flush=True)
@@ -211,6 +213,7 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
             raise _Stop("link_lost", f"the rig at {hardware[0]}:{hardware[1]} did not answer the session start")
         if pacer is not None:
             pacer.start()
+        stops.__enter__()
         for span in range(first_span, run["max_spans"]):
             for _ in range(n):
                 k = master.k
@@ -219,6 +222,8 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
                 master.step()
                 if pacer is not None:
                     pacer.done(k)
+                if stops.requested is not None:
+                    raise KeyboardInterrupt
                 out = master.values["catenary"]
                 if not (abs(out[i_f]) <= f_lim and abs(out[i_z]) <= z_lim):  # also catches NaN
                     raise _Stop("diverged", f"diverged at t = {master.k * dt:.3f} s (span {span}): force "
@@ -257,6 +262,7 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
         status, message = "interrupted", f"interrupted at t = {master.k * dt:.3f} s"
         _log_span(recorder, master, topology, (master.k // n) * n, master.k, dt)
     finally:
+        stops.__exit__()
         wall = time.perf_counter() - t_start
         if pacer is not None:
             pacer.stop()
