@@ -33,7 +33,8 @@ def save(out_dir: Path, master, monitor, span: int, run_info: dict) -> None:
     folder = Path(out_dir) / STATE_DIR
     folder.mkdir(exist_ok=True)
     start, stop = span * monitor.n, master.k
-    arrays = {f"fmu_state/{name}": np.frombuffer(data, dtype=np.uint8) for name, data in master.serialize_states().items()}
+    states = master.serialize_states()
+    arrays = {f"fmu_state/{name}": np.frombuffer(data, dtype=np.uint8) for name, data in states.items()}
     for name in master.names:
         arrays[f"values/{name}"] = np.asarray(master.values[name], dtype=float)
         arrays[f"record/{name}"] = master.record[name][start:stop]

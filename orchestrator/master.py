@@ -47,8 +47,10 @@ class RecordingMaster:
     record_start = 0  # first step recorded (a resumed run records from its checkpoint's span on)
 
     def per_step_us(self) -> dict[str, float]:
+        if self.k <= self.record_start:
+            return {}
         steps = slice(self.record_start, self.k)
-        return {n: float(np.median(self.step_ns[n][steps])) / 1000.0 for n in self.step_ns} if self.k > self.record_start else {}
+        return {n: float(np.median(self.step_ns[n][steps])) / 1000.0 for n in self.step_ns}
 
 
 class JacobiMaster(RecordingMaster):

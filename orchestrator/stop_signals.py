@@ -21,7 +21,7 @@ class StopRequests:
         if self.requested is None:
             self.requested = signum
 
-    def __enter__(self) -> "StopRequests":
+    def __enter__(self) -> StopRequests:
         if threading.current_thread() is threading.main_thread():  # signals reach the main thread only
             for s in self.SIGNALS:
                 self._previous[s] = signal.signal(s, self._note)

@@ -31,8 +31,9 @@ def host(tmp_path_factory) -> Path:
     if cc is None:
         pytest.skip("no C compiler")
     exe = tmp_path_factory.mktemp("host") / "jacobi_host"
-    subprocess.run([cc, "-O2", "-std=c99", "-Wall", "-Wno-format-truncation", f"-I{Path(fmpy.__file__).parent / 'c-code'}",
-                    "-o", str(exe), str(HOST_SOURCE), "-ldl"], check=True)
+    headers = Path(fmpy.__file__).parent / "c-code"
+    subprocess.run([cc, "-O2", "-std=c99", "-Wall", "-Wno-format-truncation", f"-I{headers}", "-o", str(exe),
+                    str(HOST_SOURCE), "-ldl"], check=True)
     return exe
 
 
