@@ -1,8 +1,8 @@
 """Contact-wire height z0(x) along one span (Paper A sec. 5.1, Paper B sec. 2.2).
 
-Until the finite-element builder provides a form-found profile, z0 is either read from a CSV file
-or generated: the wire hangs in parabolas under its own weight between its fixed points (supports
-and dropper clamps), whose design heights follow an optional pre-sag parabola.
+z0 is read from a CSV file or generated: the wire hangs in parabolas under its own weight between its
+fixed points (supports and dropper clamps), whose design heights follow an optional pre-sag parabola.
+A catenary file's form-found z0 (`[profile] source = "catenary"`) comes from models/catenary/fe.
 """
 from __future__ import annotations
 
@@ -56,6 +56,7 @@ class TabulatedProfile:
     z_m: np.ndarray
 
     def heights(self, x: np.ndarray) -> np.ndarray:
+        """z0 at any x, interpolated periodically over the span [m]."""
         return np.interp(np.mod(np.asarray(x, dtype=float), self.span_m), self.x_m, self.z_m, period=self.span_m)
 
 
@@ -89,6 +90,7 @@ def read_profile_csv(path: Path, span_m: float) -> TabulatedProfile:
 
 
 def write_profile_csv(path: Path, profile, n_points: int = 6501) -> None:
+    """Write a profile's z0 at n_points along the span as `x_m,z0_m` CSV."""
     x = np.linspace(0.0, profile.span_m, n_points)
     z = profile.heights(x)
     with Path(path).open("w", newline="") as fh:

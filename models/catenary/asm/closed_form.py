@@ -51,6 +51,7 @@ class SteadyState:
         return math.sqrt(0.5 * float(np.sum(np.abs(amp) ** 2)))
 
     def force_series(self, n_samples: int) -> np.ndarray:
+        """The steady contact force at n_samples points of one span, from its harmonics (Paper A eq. 28)."""
         return synthesize(self.force_amplitudes_N, n_samples)
 
 

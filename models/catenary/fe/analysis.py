@@ -24,6 +24,7 @@ ANALYSIS_VERSION = 2
 
 @dataclass
 class AnalysisSettings:
+    """Section lengths, profile step, wave frequencies and fit bands of a catenary analysis."""
     static_spans: int = 5  # form-finding and stiffness: the central span of a 5-span section
     wave_spans: int = 12  # wavelengths: a long section with absorbing ends
     profile_step_m: float = 0.05
@@ -35,6 +36,7 @@ class AnalysisSettings:
 
 @dataclass
 class CatenaryAnalysis:
+    """A catenary file's analysis: form-found droppers, profile z0, stiffness along a span, wavelengths, fits."""
     name: str
     span_m: float
     dropper_positions_m: list
@@ -57,10 +59,12 @@ class CatenaryAnalysis:
 
     @property
     def mean_stiffness_N_m(self) -> float:
+        """Mean vertical contact-wire stiffness k_z,FEM over the central span [N/m] (Paper A sec. 4.1)."""
         return float(np.mean(self.stiffness_N_m))
 
     @property
     def support_stiffness_N_m2(self) -> float:
+        """ASM2 support stiffness kbar = k_z,FEM^2 / (4 T) [N/m^2] (Paper A eq. 32)."""
         return support_stiffness_from(self.mean_stiffness_N_m, self.contact_tension_N)
 
     @property
@@ -69,6 +73,7 @@ class CatenaryAnalysis:
         return next(f["density_kg_m"] for f in self.fits if tuple(f["band_hz"]) == (10.0, 40.0))
 
     def summary(self) -> dict:
+        """The analysis as catenary.json: droppers, stiffness, the ASM2 fit per band, profile harmonics."""
         return {
             "name": self.name, "span_m": self.span_m, "dropper_positions_m": self.dropper_positions_m,
             "dropper_lengths_m": self.dropper_lengths_m, "dropper_tensions_N": self.dropper_tensions_N,
@@ -87,6 +92,7 @@ class CatenaryAnalysis:
 
 
 def analyse(cat: CatenaryDefinition, settings: AnalysisSettings | None = None) -> CatenaryAnalysis:
+    """Form-find a catenary file, then its profile z0, stiffness k_z(x), wavelengths and ASM2 fit (Paper A sec. 4)."""
     s = settings or AnalysisSettings()
     L = cat.span_m
     mid = s.static_spans // 2
@@ -126,6 +132,7 @@ def analyse(cat: CatenaryDefinition, settings: AnalysisSettings | None = None) -
 
 
 def cache_dir() -> Path:
+    """Folder of the cached catenary analyses ($PANTOHIL_CACHE or ~/.cache/pantohil, then catenaries/)."""
     return Path(os.environ.get("PANTOHIL_CACHE", Path.home() / ".cache" / "pantohil")) / "catenaries"
 
 

@@ -22,17 +22,20 @@ class CatenaryError(ValueError):
 
 @dataclass(frozen=True)
 class Wire:
+    """A tensioned wire: tension, mass per length and bending stiffness EI."""
     tension_N: float
     mass_kg_m: float
     bending_stiffness_N_m2: float
 
     @property
     def wave_speed_m_s(self) -> float:
+        """Wave speed sqrt(T / m) of the wire [m/s]."""
         return math.sqrt(self.tension_N / self.mass_kg_m)
 
 
 @dataclass(frozen=True)
 class CatenaryDefinition:
+    """A catenary file, validated: span, encumbrance, pre-sag, droppers, wires, clamps, steady arms, damping."""
     name: str
     source: Path | None
     span_m: float
@@ -151,6 +154,7 @@ def _presag_span(c: dict) -> str:
 
 
 def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinition:
+    """Validate the sections and keys of a parsed catenary file; CatenaryError names the key at fault."""
     for sec, body in raw.items():
         if sec not in _SCHEMA:
             raise CatenaryError(f"{sec}: unknown section (known: {', '.join(_SCHEMA)})")
@@ -225,6 +229,7 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
 
 
 def load_definition(path: Path) -> CatenaryDefinition:
+    """Read and validate a catenary file (TOML); CatenaryError with one line on any fault."""
     path = Path(path)
     try:
         raw = load_toml(path, "catenary file")

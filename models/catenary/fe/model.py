@@ -73,6 +73,7 @@ class Section:
     supports: list  # (x, cw_dof, mw_dof)
 
     def node(self, x: float) -> int:
+        """Index of the node at abscissa x (ValueError if none lies there)."""
         i = int(np.argmin(np.abs(self.x - x)))
         if abs(self.x[i] - x) > 1e-6:
             raise ValueError(f"no node at x = {x}")
@@ -158,10 +159,12 @@ class FormFinding:
 
     @property
     def C(self) -> sparse.csr_matrix:
+        """Rayleigh damping C = alpha M + beta K of the linearised section."""
         cat = self.section.cat
         return (cat.alpha_1_s * self.M + cat.beta_s * self.K).tocsr()
 
     def free(self) -> np.ndarray:
+        """Indices of the dofs not held fixed."""
         mask = np.ones(self.section.ndof, dtype=bool)
         mask[self.fixed] = False
         return np.flatnonzero(mask)

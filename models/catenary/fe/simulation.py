@@ -29,6 +29,7 @@ from pantohil.models.catenary.pfem.blocks import hermite_shapes
 
 @dataclass
 class FeSimResult:
+    """Time histories of a fem-sim run: position, contact force and state, dropper forces and corrections, uplift."""
     t_s: np.ndarray
     x_m: np.ndarray  # pantograph position
     force_N: np.ndarray

@@ -54,6 +54,7 @@ class ContactBlock:
 
     @property
     def n_droppers(self) -> int:
+        """Number of droppers of the block (0 for a string)."""
         return 0 if self.dropper_x_m is None else len(self.dropper_x_m)
 
     def dropper_shapes(self) -> tuple[sparse.csr_matrix, sparse.csr_matrix]:

@@ -53,10 +53,12 @@ class PeriodicBlock:
 
     @property
     def ndof(self) -> int:
+        """Number of dofs of the block."""
         return self.K.shape[0]
 
     @property
     def inner(self) -> np.ndarray:
+        """Indices of the inner dofs I (neither left nor right boundary; Paper C eq. 7)."""
         mask = np.ones(self.ndof, dtype=bool)
         mask[self.left] = False
         mask[self.right] = False
@@ -179,6 +181,10 @@ class FixedInterfaceModel:
 
     @classmethod
     def build(cls, block: PeriodicBlock, period_s: float) -> FixedInterfaceModel:
+        """Craig-Bampton form of a block: the inner dofs' fixed-interface modes and the boundary coupling.
+
+        Exact (every mode kept); needs C = alpha M + beta K plus damping on the boundary dofs only.
+        """
         B = np.concatenate([block.left, block.right])
         I = block.inner  # noqa: E741 (Paper C's inner dofs)
         K, M = block.K, block.M
@@ -221,6 +227,7 @@ class FixedInterfaceModel:
         return c, d, S, P
 
     def bloch(self, omega: np.ndarray) -> np.ndarray:
+        """The periodicity map U_L = exp(i w T) U_R (Paper C eq. 4) per frequency, boundary dofs from the right ones."""
         nR = self.n_right
         P = np.zeros((len(omega), 2 * nR, nR), dtype=complex)
         P[:, :nR, :] = np.exp(1j * np.asarray(omega) * self.period_s)[:, None, None] * np.eye(nR)

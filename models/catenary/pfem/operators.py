@@ -77,10 +77,12 @@ class PfemOperators:
 
     @property
     def n(self) -> int:
+        """Number of contact samples N of the block."""
         return self.cc.shape[0]
 
     @property
     def n_droppers(self) -> int:
+        """Number of droppers of the block."""
         return len(self.dropper_x_m)
 
 
@@ -123,6 +125,7 @@ def spectral_taper(omega: np.ndarray, omega_max: float, fraction: float) -> np.n
 
 
 def operator_grid(s: PfemSettings, alpha: float, beta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Frequencies and transform weights of the operators: uniform (Paper C eq. 17) or graded by damping."""
     if s.grid == "uniform":
         omega, _ = frequency_grid(s.dt_s, s.d_omega, s.omega_max)
         return omega, transform_weights(omega, s.dt_s)
