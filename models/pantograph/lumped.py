@@ -30,6 +30,7 @@ class PantographParameters:
 
     @property
     def n(self) -> int:
+        """Number of masses of the chain."""
         return len(self.masses_kg)
 
     def matrices(self):
@@ -134,6 +135,7 @@ class ChainPantograph:
 
     @property
     def head_height(self) -> float:
+        """Height of the head (mass 1) [m]."""
         return float(self.head_ref + self.u[0])
 
     def _affine_step(self, contact: bool) -> np.ndarray:
@@ -198,15 +200,18 @@ class RigidMass:
         self.force = -self.m * self.g
 
     def settle(self, z: float) -> float:
+        """Rest on the actuator at height z: zero velocity and acceleration; returns the static force -m g [N]."""
         self.z, self.v, self.acc = z, 0.0, 0.0
         self.force = -self.m * self.g
         return self.force
 
     @property
     def head_height(self) -> float:
+        """Height of the mass, which follows the actuator [m]."""
         return self.z
 
     def step(self, z_next: float) -> float:
+        """Move the mass to z_next with HHT's Newmark update; returns the force -m (g + a) [N]."""
         b, g, dt = self.hht.beta, self.hht.gamma, self.dt
         acc_new = (z_next - self.z - dt * self.v - dt * dt * (0.5 - b) * self.acc) / (b * dt * dt)
         self.v += dt * ((1 - g) * self.acc + g * acc_new)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class ActuatorLimits:
+    """Stroke, velocity and acceleration limits of the actuator (LinMot PS10-70x240U: 5.4 m/s, 1650 N)."""
     stroke_min_m: float = -0.12
     stroke_max_m: float = 0.12
     max_velocity_m_s: float = 5.4

@@ -120,4 +120,5 @@ class Rig:
         return f
 
     def step(self, z_command: float, f_true: float) -> tuple[float, float]:
+        """One sample of the rig: (actuator height, measured force) for a commanded height and a true force."""
         return self.height(z_command), self.force(f_true)

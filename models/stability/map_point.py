@@ -54,6 +54,7 @@ class StabilityProblem:
                 self.basis = circulant_range_basis(self.kernel) if self.kernel is not None else range_basis(self.I_cc)
 
     def settings(self, mu: float) -> HilSettings:
+        """The HIL settings of the problem at relaxation mu."""
         return HilSettings(self.update, mu, self.delay_steps)
 
     def spectral_radius(self, mu: float) -> float:
@@ -83,6 +84,7 @@ def best_relaxation(problem: StabilityProblem, grid=RELAXATION_GRID, xatol: floa
 
 
 def with_contact_stiffness(params: PantographParameters, kc: float) -> PantographParameters:
+    """The pantograph with penalty contact stiffness k_c (> 0) [N/m]."""
     if not kc > 0:
         raise ValueError(f"contact stiffness must be > 0, got {kc}")
     return dataclasses.replace(params, contact_stiffness_N_m=float(kc))
@@ -95,5 +97,9 @@ def contact_frequency_hz(params: PantographParameters, kc: np.ndarray) -> np.nda
 
 def problem_for(update: str, pantograph: PantographParameters, dt_s: float, latency_steps: int, delay_steps: int,
                 kernel: np.ndarray | None = None, I_cc: np.ndarray | None = None) -> StabilityProblem:
+    """The stability problem of an update strategy, pantograph, latency and delay advance D.
+
+    The operator is a circulant kernel (ASM) or a dense I_cc (PFEM).
+    """
     return StabilityProblem(update, linear_pantograph(pantograph, dt_s), latency_steps, delay_steps, kernel=kernel,
                             I_cc=I_cc)
