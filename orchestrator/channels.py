@@ -43,10 +43,12 @@ def group_schema(topic: str, fields: dict[str, str]) -> bytes:
 
 
 def event_schema(topic: str) -> bytes:
+    """The JSON schema of an event topic, as bytes for MCAP and Foxglove."""
     return json.dumps(EVENT_SCHEMAS.get(topic, {"title": topic, "type": "object"})).encode()
 
 
 def schema_name(topic: str) -> str:
+    """The schema name of a topic (the topic without its slashes)."""
     return topic.strip("/")
 
 
@@ -58,6 +60,7 @@ class RowEncoder:
         self._template = "{" + ",".join(f'"{n}":%.10g' for n in self.keys) + "}"
 
     def encode(self, t: np.ndarray, columns: np.ndarray) -> list[bytes]:
+        """One JSON message per step from the times and the signal columns (non-finite values as null)."""
         columns = np.asarray(columns, dtype=float)
         rows = zip(np.asarray(t, dtype=float).tolist(), columns.tolist(), strict=False)
         if bool(np.isfinite(columns).all()):
@@ -82,5 +85,6 @@ def encode_event(t: float, record: dict) -> bytes:
 
 
 def span_force_record(span: int, dt_s: float, force: np.ndarray, previous: np.ndarray | None) -> dict:
+    """The /span_force message of a span: its force and the previous span's [N]."""
     return {"span": span, "dt_s": dt_s, "force_N": [float(f) for f in force],
             "previous_force_N": [] if previous is None else [float(f) for f in previous]}

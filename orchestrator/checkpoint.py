@@ -25,6 +25,7 @@ FORMAT = 1
 
 
 def fmu_digests(fmus: dict[str, Path]) -> dict[str, str]:
+    """SHA-256 of each FMU file, so that a resumed run uses the same FMUs."""
     return {name: hashlib.sha256(Path(p).read_bytes()).hexdigest() for name, p in fmus.items()}
 
 

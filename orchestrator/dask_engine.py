@@ -56,6 +56,7 @@ def tune_worker_allocator() -> None:
 
 
 def worker_count(client) -> int:
+    """Number of workers the Dask scheduler of `client` has."""
     return len(client.scheduler_info().get("workers", {}))
 
 

@@ -9,6 +9,11 @@ from pantohil.models.catenary.asm.closed_form import (one_sided_harmonics, optim
 
 
 def direct_solution(case: Case, second_at_m: float | None = None, max_spacing_m: float = 200.0) -> dict:
+    """Closed-form ASM2 steady state of a case (Paper A eqs. 38-41), with a trailing pantograph if asked.
+
+    With `second_at_m`, the trailing pantograph's std at that spacing and its optimal spacings L_min up to
+    `max_spacing_m` (Paper A eqs. 42-45).
+    """
     z0 = case.z0_samples()
     amps = one_sided_harmonics(z0)
     args = (case.catenary, case.pantograph, case.speed_m_s, case.span_m, amps, case.pantograph.uplift_force_N,

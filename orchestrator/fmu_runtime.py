@@ -29,10 +29,12 @@ class Port:
         self._set = fmu.raw(f"fmi2Set{kind}")
 
     def read(self) -> list:
+        """Get the port's variables from the FMU in one call."""
         self.fmu.check(self._get(self.fmu.component, self.vr, self.n, self.values), f"get {self.names}")
         return self.values[:]
 
     def write(self, values) -> None:
+        """Set the port's variables in the FMU in one call."""
         self.values[:] = values
         self.fmu.check(self._set(self.fmu.component, self.vr, self.n, self.values), f"set {self.names}")
 
@@ -55,19 +57,23 @@ class FmuInstance:
         self._do_step = self.raw("fmi2DoStep")
 
     def raw(self, function: str):
+        """The FMI function `function` of the loaded library, for calls fmpy does not wrap."""
         return self.slave._functions[function]
 
     def check(self, status: int, what: str) -> None:
+        """Raise FmuError naming the FMU and the call if an FMI status is worse than fmi2Warning."""
         if status > 1:
             raise FmuError(f"FMU {self.name}: {what} returned {STATUS_NAMES.get(status, status)}")
 
     def setup(self, start_time: float, parameters: dict) -> None:
+        """Set up the experiment at start_time, set the parameters, enter and exit initialisation."""
         self.slave.setupExperiment(startTime=start_time)
         self.set_values(parameters)
         self.slave.enterInitializationMode()
         self.slave.exitInitializationMode()
 
     def set_values(self, values: dict) -> None:
+        """Set variables by name (FmuError for a name the FMU does not have)."""
         for name, value in values.items():
             if name not in self.vr:
                 raise FmuError(f"FMU {self.name} has no variable {name!r}")
@@ -75,9 +81,11 @@ class FmuInstance:
             getattr(self.slave, f"set{kind}")([self.vr[name]], [value])
 
     def get_values(self, names: list[str]) -> dict:
+        """Get variables by name."""
         return {n: getattr(self.slave, f"get{self.types[n]}")([self.vr[n]])[0] for n in names}
 
     def port(self, names: list[str]) -> Port:
+        """A Port that gets or sets these variables (all of one type) in one FMI call."""
         kinds = {self.types[n] for n in names}
         if len(kinds) != 1:
             raise ValueError(f"a port takes variables of one type, got {kinds}")
@@ -100,9 +108,11 @@ class FmuInstance:
             self.slave.freeFMUstate(state)
 
     def do_step(self, t: float, dt: float) -> None:
+        """fmi2DoStep from t over dt; FmuError if the FMU refuses."""
         self.check(self._do_step(self.component, t, dt, 1), f"doStep at t={t:.6f} s")
 
     def close(self) -> None:
+        """Terminate and free the instance, keeping the FMU library loaded (unloading it is not safe)."""
         try:
             self.slave.terminate()
             # not slave.freeInstance(), which also unloads the library: pythonfmu's binary owns Python

@@ -34,12 +34,14 @@ class RecordingMaster:
         self.k = 0
 
     def column(self, fmu: str, output: str, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """The recorded values of an FMU output over steps start..stop."""
         stop = self.k if stop is None else stop
         if output in self.real_outputs[fmu]:
             return self.record[fmu][start:stop, self.real_outputs[fmu].index(output)]
         return self.record_int[fmu][start:stop, self.int_outputs[fmu].index(output)]
 
     def input_column(self, fmu: str, src: str, output: str, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """The recorded values an FMU received from output `output` of `src` over steps start..stop."""
         stop = self.k if stop is None else stop
         j = self._in_map[fmu].index((src, self.real_outputs[src].index(output)))
         return self.record_in[fmu][start:stop, j]
@@ -47,6 +49,7 @@ class RecordingMaster:
     record_start = 0  # first step recorded (a resumed run records from its checkpoint's span on)
 
     def per_step_us(self) -> dict[str, float]:
+        """Median time per step of each FMU over the recorded steps [us]."""
         if self.k <= self.record_start:
             return {}
         steps = slice(self.record_start, self.k)
@@ -108,12 +111,15 @@ class JacobiMaster(RecordingMaster):
         self.k = k + 1
 
     def serialize_states(self) -> dict[str, bytes]:
+        """Every FMU's serialized state, by instance name (a checkpoint of the system)."""
         return {n: inst.serialize_state() for n, inst in self.instances.items()}
 
     def deserialize_states(self, states: dict[str, bytes]) -> None:
+        """Put back every FMU's state from serialize_states."""
         for n, inst in self.instances.items():
             inst.deserialize_state(states[n])
 
     def close(self) -> None:
+        """Close every FMU instance."""
         for inst in self.instances.values():
             inst.close()
