@@ -38,10 +38,12 @@ class PythonRuntime:
     minor: int
 
     def key(self) -> str:
+        """The runtime as a string for the FMU cache key."""
         return f"{self.libpython}|{self.home}|{self.path}|{self.minor}"
 
 
 def python_runtime() -> PythonRuntime:
+    """This interpreter's libpython, home and the site-packages holding numpy and scipy, for the loader."""
     libdir, soname = sysconfig.get_config_var("LIBDIR"), sysconfig.get_config_var("INSTSONAME")
     lib = Path(libdir or "", soname or "")
     libpython = str(lib) if sysconfig.get_config_var("Py_ENABLE_SHARED") and lib.is_file() else ""
@@ -56,6 +58,7 @@ def python_runtime() -> PythonRuntime:
 
 
 def compiler() -> str:
+    """The C compiler to build the loader with: $CC or cc on PATH (LoaderError if there is none)."""
     cc = os.environ.get("CC", "cc")
     found = shutil.which(cc)
     if found is None:

@@ -65,6 +65,7 @@ def build_layout(topology: str) -> fl.Layout:
 
 
 def layout_json(topology: str) -> str:
+    """The Foxglove layout of a topology ("virtual" or "rig") as JSON text."""
     return json.dumps(json.loads(build_layout(topology).to_json()), indent=2) + "\n"
 
 
@@ -90,6 +91,7 @@ def layout_topics(layout: dict) -> set[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Write the shipped Foxglove layouts into a folder (default docs/foxglove)."""
     folder = Path((argv or sys.argv[1:] or ["docs/foxglove"])[0])
     folder.mkdir(parents=True, exist_ok=True)
     for topology, name in LAYOUT_FILES.items():

@@ -36,6 +36,7 @@ def background_priority() -> None:
 
 
 class Pacer:
+    """Paces a master at dt against the wall clock and records each step's lateness and duration."""
     def __init__(self, dt_s: float, capacity: int):
         self.dt = dt_s
         self.lateness_ns = np.zeros(capacity, dtype=np.int64)
@@ -46,11 +47,13 @@ class Pacer:
         self._gc_was_enabled = gc.isenabled()
 
     def start(self) -> None:
+        """Start the clock (the first step 2 ms from now) with the garbage collector off."""
         gc.collect()
         gc.disable()  # a collection pause would miss deadlines; the loop makes little garbage
         self._t0 = time.perf_counter_ns() + 2_000_000  # first step 2 ms from now
 
     def wait(self, k: int) -> None:
+        """Wait until the deadline of step k: sleep, then spin over the last 0.1 ms."""
         target = self._t0 + int(round(k * self.dt * 1e9))
         while True:
             now = time.perf_counter_ns()
@@ -71,10 +74,12 @@ class Pacer:
         self.steps = k + 1
 
     def stop(self) -> None:
+        """Turn the garbage collector back on if it was on."""
         if self._gc_was_enabled:
             gc.enable()
 
     def summary(self) -> dict:
+        """Steps, deadline misses and lateness percentiles (p50, p99, max) [us] for summary.json."""
         late = self.lateness_ns[: self.steps] / 1000.0
         pct = (lambda q: float(np.percentile(late, q))) if self.steps else (lambda q: 0.0)
         return {"steps": self.steps, "dt_s": self.dt, "deadline_misses": self.misses,

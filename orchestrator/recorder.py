@@ -57,6 +57,7 @@ class McapWriter:
         return self._channels[topic]
 
     def write_event(self, topic: str, t: float, record: dict) -> None:
+        """Log one JSON message (a per-span record or an event) on a topic at simulated time t [s]."""
         ns = int(round(t * 1e9))
         self._writer.add_message(self._event_channel(topic), ns, encode_event(t, record), ns)
         self.messages += 1
@@ -66,6 +67,7 @@ class McapWriter:
         self._fh.flush()
 
     def close(self) -> None:
+        """Finish the MCAP file (summary and footer) once, so that it stays readable."""
         if not self._closed:
             self._closed = True
             try:
@@ -118,14 +120,17 @@ class McapRecorder:
         self._closed = False
 
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
+        """Send a block of per-step rows of a topic to the logger process."""
         self._send.send(("block", topic, np.asarray(t), np.asarray(columns)))
         self.messages += len(t)
 
     def write_event(self, topic: str, t: float, record: dict) -> None:
+        """Send one JSON message of a topic to the logger process."""
         self._send.send(("event", topic, t, record))
         self.messages += 1
 
     def close(self, timeout_s: float = 120.0) -> None:
+        """Tell the logger process to finish the MCAP file and wait for it, at most timeout_s."""
         if self._closed:
             return
         self._closed = True

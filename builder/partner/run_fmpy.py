@@ -22,6 +22,7 @@ HERE = Path(__file__).resolve().parent
 
 
 def main() -> int:
+    """Run the packaged SSP system with fmpy and compare the converged span with reference/; exit 1 if off."""
     cfg = json.loads((HERE / "system.json").read_text())
     ssp = HERE / cfg["ssp"]
     ssd = read_ssd(str(ssp))
