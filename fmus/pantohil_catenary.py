@@ -121,6 +121,7 @@ VARIABLES = [
 
 
 class PantohilCatenary(PantohilSlave):
+    """The catenary FMU: the periodic operator (ASM2 or PFEM) and the HIL iteration (Paper D sec. 3)."""
     author = "pantohil"
     description = ("Periodic catenary (ASM2 analytical string, Gil et al. Papers A-B, or PFEM with dropper "
                    "slackening, Papers C-D) for steady-state HIL "
@@ -139,6 +140,7 @@ class PantohilCatenary(PantohilSlave):
         return {"profile": self._z0, **{f"hil.{a}": getattr(self._hil, a) for a in self._hil.CONSTANT_ATTRIBUTES}}
 
     def exit_initialization_mode(self):
+        """Build the operator (ASM2 from its parameters, or the PFEM operators in the resources) and the iteration."""
         n = int(self.samples_per_span)
         self.harmonics = harmonic_count(self.max_frequency, n, self.time_step)
         settings = HilSettings(UPDATES[self.update_strategy], self.relaxation, self.delay_steps, self.ramp_steps)
@@ -167,6 +169,7 @@ class PantohilCatenary(PantohilSlave):
         self.height_command = 0.0 if self.ramp_steps > 0 else self._hil.current_height(self.delay_steps % n)
 
     def do_step(self, current_time, step_size):
+        """Take the measured force of this step and output the height to command (Paper D eqs. 2-3, 10)."""
         hil = self._hil
         self._label = hil.k % hil.n
         self.height_command = hil.step(self.contact_force)
@@ -178,26 +181,32 @@ class PantohilCatenary(PantohilSlave):
 
     @property
     def sample_index(self) -> int:
+        """Output: the sample n_bar of the span the last force belonged to."""
         return self._label
 
     @property
     def span_index(self) -> int:
+        """Output: the virtual span b the last force belonged to."""
         return 0 if self._hil is None else max(self._hil.k - 1, 0) // self._hil.n
 
     @property
     def height_at_sample(self) -> float:
+        """Output: the converging wire height at sample_index [m]."""
         return 0.0 if self._hil is None else float(self._hil.z[self._label])
 
     @property
     def profile_at_sample(self) -> float:
+        """Output: the static height z0 at sample_index [m]."""
         return 0.0 if self._hil is None else float(self._z0[self._label])
 
     @property
     def force_at_sample(self) -> float:
+        """Output: the force in use at sample_index (the measured one, or the previous span's) [N]."""
         return 0.0 if self._hil is None else float(self._hil.last_force[self._label])
 
     @property
     def slack_droppers(self) -> int:
+        """Output: the number of droppers with a correction force (slack) at this step."""
         return int(np.count_nonzero(self._dropper_forces()))
 
     def _dropper_forces(self) -> np.ndarray:

@@ -57,6 +57,7 @@ VARIABLES = [
 
 
 class PantohilPantograph(PantohilSlave):
+    """The pantograph FMU: a lumped chain with penalty contact, or a rigid mass, HHT-integrated."""
     author = "pantohil"
     description = "Lumped pantograph (Paper A Table A.3 chain, HHT alpha=-0.05) with penalty contact and contact loss."
 
@@ -66,6 +67,7 @@ class PantohilPantograph(PantohilSlave):
         self._model = None
 
     def exit_initialization_mode(self):
+        """Build the pantograph from its parameters and settle it at the actuator's starting height."""
         n = int(self.n_masses) if self.pantograph_model == 0 else 1
         def pick(stem):
             return tuple(float(getattr(self, f"{stem}_{i}")) for i in range(1, n + 1))
@@ -87,6 +89,7 @@ class PantohilPantograph(PantohilSlave):
         self.in_contact = self.contact_force > 0.0
 
     def do_step(self, current_time, step_size):
+        """One HHT step to the actuator height of this step; outputs the contact force [N]."""
         self.contact_force = self._model.step(self.height)
         self._publish()
         return True

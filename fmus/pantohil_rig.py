@@ -32,6 +32,7 @@ VARIABLES = [
 
 
 class PantohilRig(PantohilSlave):
+    """The rig FMU: delay, N_com decimation with the drive's ramp, servo, load cell, offset and noise."""
     author = "pantohil"
     description = (
         "HIL rig between model and pantograph: delay, N_com decimation with linear drive ramp, servo, load cell."
@@ -48,11 +49,13 @@ class PantohilRig(PantohilSlave):
                              int(self.noise_seed))
 
     def exit_initialization_mode(self):
+        """Build the rig at its starting height and force, and output its latency in steps."""
         params = self._params()
         self._rig = Rig(params, self.time_step, self.height_command, self.true_force)
         self.latency_steps = params.latency_steps(self.time_step)
         self.actuator_height = self.height_command
 
     def do_step(self, current_time, step_size):
+        """One sample of the rig: the actuator height and the measured force of this step."""
         self.actuator_height, self.measured_force = self._rig.step(self.height_command, self.true_force)
         return True
