@@ -159,7 +159,7 @@ def read_ssp(path: Path, into: Path) -> dict:
     if not case_file.exists():
         raise SspError(f"{path}: no {CASE_RESOURCE} (not written by pantohil build --ssp)")
     system = ssd.system
-    fmus = {c.name: Path(into) / c.source for c in system.elements}
+    fmus = {c.name: _member_fmu(path, Path(into), c.name, c.source) for c in system.elements}
     connections = tuple((c.startElement, c.startConnector, c.endElement, c.endConnector) for c in system.connections)
     parameters: dict[str, dict] = {}
     for binding in system.parameterBindings:
@@ -173,6 +173,41 @@ def read_ssp(path: Path, into: Path) -> dict:
                 )
                 parameters.setdefault(comp, {})[var] = value
     return {"fmus": fmus, "connections": connections, "parameters": parameters, "case_file": case_file}
+
+
+def _member_fmu(ssp: Path, into: Path, component: str, source: str) -> Path:
+    """The FMU of a component: a member of the archive (a path that leaves it is refused) that is an
+    FMU for this platform (a model description and a shared library of the platform's format)."""
+    root = into.resolve()
+    fmu = (root / source).resolve()
+    if "://" in source or not fmu.is_relative_to(root) or fmu == root:
+        raise SspError(f"{ssp}: component {component!r}: source {source!r} is not a member of the archive")
+    if not fmu.is_file():
+        raise SspError(f"{ssp}: component {component!r}: {source} is not in the archive")
+    check_fmu(fmu, f"{ssp}: component {component!r}: {source}")
+    return fmu
+
+
+def check_fmu(fmu: Path, what: str) -> None:
+    """Refuse, in one line, a file that is not an FMU 2.0 co-simulation unit runnable on this platform."""
+    from fmpy import platform, sharedLibraryExtension
+
+    try:
+        md = read_model_description(str(fmu))
+        if md.coSimulation is None:
+            raise SspError(f"{what}: not a co-simulation FMU")
+        binary = f"binaries/{platform}/{md.coSimulation.modelIdentifier}{sharedLibraryExtension}"
+        with zipfile.ZipFile(fmu) as z, z.open(binary) as lib:
+            magic = lib.read(4)
+    except SspError:
+        raise
+    except KeyError:
+        raise SspError(f"{what}: no binary for {platform} in the FMU") from None
+    except Exception as exc:  # a bad zip, a bad or invalid modelDescription.xml
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise SspError(f"{what}: not a readable FMU ({detail})") from None
+    if sharedLibraryExtension == ".so" and magic != b"\x7fELF":
+        raise SspError(f"{what}: its binary {binary} is not a shared library")
 
 
 def temporary_dir(prefix: str) -> Path:
