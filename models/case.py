@@ -48,6 +48,7 @@ _SET_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
 def load_case_dict(path: Path | None) -> tuple[dict, Path]:
+    """Read a case file (the built-in asm_250 if none) as a dict; CaseError with one line on a bad file."""
     path = Path(path) if path is not None else DEFAULT_CASE
     try:
         return load_toml(path, "case file"), path
@@ -201,15 +202,19 @@ class Case:
 
     @property
     def speed_kmh(self) -> float:
+        """Pantograph speed [km/h]."""
         return self.speed_m_s * 3.6
 
     def hil_settings(self, delay_steps: int) -> HilSettings:
+        """The case's HIL settings with delay advance D = delay_steps (Paper D sec. 3)."""
         return HilSettings(self.hil_update, self.relaxation, delay_steps, self.ramp_steps)
 
     def sample_positions_m(self) -> np.ndarray:
+        """Position x of the contact point at each of the N samples of a span [m]."""
         return np.arange(self.samples_per_span) * self.speed_m_s * self.dt_s
 
     def z0_samples(self) -> np.ndarray:
+        """Static contact-wire height z0 at the N samples of a span [m]."""
         return self.profile.heights(self.sample_positions_m())
 
     def reference_height_m(self) -> float:
@@ -310,6 +315,10 @@ def _check_profile(v: dict, case_path: Path):
 
 
 def build_case(raw: dict, source: Path) -> Case:
+    """Validate a parsed case (taking ASM2 data and z0 from its catenary file if it names one) into a Case.
+
+    Adjusts dt so that a span holds a whole number of samples; CaseError names the key at fault.
+    """
     v = validate(_fill_from_definition(raw, source))
     c, run, hil = v["catenary"], v["run"], v["hil"]
     cat = AsmParameters(c["tension_N"], c["density_kg_m"], c["support_stiffness_N_m2"], c["alpha_1_s"], c["beta_s"])
@@ -357,5 +366,6 @@ def build_case(raw: dict, source: Path) -> Case:
 
 
 def load_case(path: Path | None = None, overrides: list[str] | None = None) -> Case:
+    """Load, override (`section.key=value` strings) and validate a case file into a Case."""
     raw, source = load_case_dict(path)
     return build_case(apply_overrides(raw, overrides or []), source)

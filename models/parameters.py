@@ -59,12 +59,14 @@ class Param:
         return f"{opening}{lo}, {hi}{closing}"
 
     def contains(self, x: float) -> bool:
+        """Whether x lies in the parameter's range (open or closed at each end)."""
         if self.low is not None and (x <= self.low if self.low_open else x < self.low):
             return False
         return not (self.high is not None and (x >= self.high if self.high_open else x > self.high))
 
 
 def json_like(value) -> str:
+    """A value as written in TOML or JSON (strings quoted, booleans lower case), for messages and docs."""
     if isinstance(value, str):
         return f'"{value}"'
     if isinstance(value, bool):
@@ -240,6 +242,7 @@ class Key:
 
     @property
     def dotted(self) -> str:
+        """The key as `section.name`."""
         return f"{self.section}.{self.name}"
 
 
@@ -252,6 +255,7 @@ def section_keys(section: str) -> dict[str, Key]:
 
 
 def all_keys() -> list[Key]:
+    """Every case key of every section, in declaration order."""
     return [k for s in SECTIONS for k in section_keys(s).values()]
 
 
@@ -261,4 +265,5 @@ def fmu_keys(fmu: str) -> list[Key]:
 
 
 def is_finite_number(x) -> bool:
+    """Whether x is an int or float (not a bool) and finite."""
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)

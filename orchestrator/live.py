@@ -89,6 +89,7 @@ class LivePublisher:
 
     @property
     def url(self) -> str:
+        """The WebSocket URL viewers connect to."""
         return f"ws://{self.host}:{self.port}"
 
     def wait_for_viewer(self) -> None:
@@ -133,6 +134,7 @@ class LivePublisher:
         self.published += 1
 
     def summary(self) -> dict:
+        """The live part of summary.json: URL, decimation and rate, messages published, whether a viewer subscribed."""
         return {"url": self.url, "every_steps": self.decimation, "rate_hz": 1.0 / (self.decimation * self.dt_s),
                 "published_messages": self.published, "viewer_subscribed": self._viewers.subscribed.is_set()}
 
