@@ -19,6 +19,7 @@ SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
 SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 OSP = "http://opensimulationplatform.com/MSMI/OSPSystemStructure"
+OMS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
 CASE_RESOURCE = "resources/case.toml"
 PARAMETERS_RESOURCE = "resources/parameters.ssv"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
@@ -26,6 +27,7 @@ FMU_TYPE = "application/x-fmu-sharedlibrary"
 ET.register_namespace("ssc", SSC)
 ET.register_namespace("ssd", SSD)
 ET.register_namespace("ssv", SSV)
+ET.register_namespace("oms", OMS)
 
 
 def _q(ns: str, tag: str) -> str:
@@ -46,8 +48,43 @@ def _fmt(kind: str, value) -> str:
     return str(int(value))
 
 
+def _oms_annotation(parent: ET.Element, **simulation_information) -> ET.Element:
+    """OMSimulator's annotation (org.openmodelica): its standalone program loads an SSP only with
+    oms:SimulationInformation/oms:FixedStepMaster on the system."""
+    annotations = ET.SubElement(parent, _q(SSD, "Annotations"))
+    annotation = ET.SubElement(annotations, _q(SSC, "Annotation"), {"type": "org.openmodelica"})
+    info = ET.SubElement(ET.SubElement(annotation, _q(OMS, "Annotations")), _q(OMS, "SimulationInformation"),
+                         simulation_information)
+    return info
+
+
+def _parameter_set(name: str, fmus: dict[str, Path], parameters: dict[str, dict]) -> ET.Element:
+    """parameters.ssv: every parameter value, Real ones with their unit (defined in ssv:Units)."""
+    pset = ET.Element(_q(SSV, "ParameterSet"), {"version": "1.0", "name": name})
+    params = ET.SubElement(pset, _q(SSV, "Parameters"))
+    units = set()
+    for comp, path in fmus.items():
+        by_name = {v.name: v for v in _variables(path)}
+        for var, value in parameters.get(comp, {}).items():
+            v = by_name[var]
+            p = ET.SubElement(params, _q(SSV, "Parameter"), {"name": f"{comp}.{var}"})
+            attrs = {"value": _fmt(v.type, value)}
+            if v.type == "Real" and v.unit:
+                attrs["unit"] = v.unit
+                units.add(v.unit)
+            ET.SubElement(p, _q(SSV, v.type), attrs)
+    _units(ET.SubElement(pset, _q(SSV, "Units")), units)
+    return pset
+
+
+def _units(parent: ET.Element, units: set[str]) -> None:
+    for u in sorted(units):
+        unit = ET.SubElement(parent, _q(SSC, "Unit"), {"name": u})
+        ET.SubElement(unit, _q(SSC, "BaseUnit"), {k: str(e) for k, e in UNITS[u].items()})
+
+
 def system_structure(name: str, fmus: dict[str, Path], parameters: dict[str, dict], stop_time_s: float,
-                     description: str) -> tuple[bytes, bytes]:
+                     description: str, dt: float) -> tuple[bytes, bytes]:
     """SystemStructure.ssd and parameters.ssv (bytes) for the FMUs of the standard topology."""
     root = ET.Element(_q(SSD, "SystemStructureDescription"), {"version": "1.0", "name": name,
                                                               "generationTool": "pantohil"})
@@ -69,20 +106,15 @@ def system_structure(name: str, fmus: dict[str, Path], parameters: dict[str, dic
     for src, out, dst, inp in CONNECTIONS:
         ET.SubElement(connections, _q(SSD, "Connection"), {"startElement": src, "startConnector": out,
                                                           "endElement": dst, "endConnector": inp})
-    unit_defs = ET.SubElement(root, _q(SSD, "Units"))
-    for u in sorted(units):
-        unit = ET.SubElement(unit_defs, _q(SSC, "Unit"), {"name": u})
-        ET.SubElement(unit, _q(SSC, "BaseUnit"), {k: str(e) for k, e in UNITS[u].items()})
-    ET.SubElement(root, _q(SSD, "DefaultExperiment"), {"startTime": "0.0", "stopTime": repr(float(stop_time_s))})
+    _oms_annotation(system).append(ET.Element(_q(OMS, "FixedStepMaster"), {  # Jacobi, as pantohil's masters
+        "description": "oms-ma", "stepSize": repr(float(dt)), "absoluteTolerance": "0.0001",
+        "relativeTolerance": "0.0001"}))
+    _units(ET.SubElement(root, _q(SSD, "Units")), units)
+    experiment = ET.SubElement(root, _q(SSD, "DefaultExperiment"), {"startTime": "0.0",
+                                                                     "stopTime": repr(float(stop_time_s))})
+    _oms_annotation(experiment, resultFile=f"{name}_res.csv", loggingInterval=repr(float(dt)))
     ET.indent(root)
-
-    pset = ET.Element(_q(SSV, "ParameterSet"), {"version": "1.0", "name": name})
-    params = ET.SubElement(pset, _q(SSV, "Parameters"))
-    for comp, path in fmus.items():
-        kinds = {v.name: v.type for v in _variables(path)}
-        for var, value in parameters.get(comp, {}).items():
-            p = ET.SubElement(params, _q(SSV, "Parameter"), {"name": f"{comp}.{var}"})
-            ET.SubElement(p, _q(SSV, kinds[var]), {"value": _fmt(kinds[var], value)})
+    pset = _parameter_set(name, fmus, parameters)
     ET.indent(pset)
     def decl(el):
         return ET.tostring(el, encoding="UTF-8", xml_declaration=True)
@@ -121,7 +153,7 @@ def write_ssp(path: Path, name: str, fmus: dict[str, Path], parameters: dict[str
     """Write FILE.ssp atomically, and OspSystemStructure.xml with the FMUs in a folder next to it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    ssd, ssv = system_structure(name, fmus, parameters, stop_time_s, description)
+    ssd, ssv = system_structure(name, fmus, parameters, stop_time_s, description, dt)
     part = path.with_suffix(".ssp.part")
     with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("SystemStructure.ssd", ssd)

@@ -418,8 +418,10 @@ def _cmd_build(args) -> int:
         if args.ssp is not None:
             from pantohil.orchestrator.package import make_ssp
 
-            ssp = make_ssp(case, {n: fmus[n] for n in FMU_NAMES}, args.ssp, args.overrides)
-            print(f"{ssp}: SSP of {len(fmus)} FMUs; OSP system structure in {ssp.parent / (ssp.stem + '_osp')}")
+            in_ssp = {n: fmus[n] for n in FMU_NAMES}  # the virtual HIL: the adapter is for rigs
+            ssp = make_ssp(case, in_ssp, args.ssp, args.overrides)
+            print(f"{ssp}: SSP of {len(in_ssp)} FMUs ({', '.join(in_ssp)}); OSP system structure in "
+                  f"{ssp.parent / (ssp.stem + '_osp')}")
     return 1 if bad else 0
 
 

@@ -124,3 +124,26 @@ def test_bad_ssp_gives_one_line(tmp_path):
     proc = pantohil("run", str(bad), "--out", str(tmp_path / "x"))
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.slow
+def test_ssp_carries_omsimulators_annotation_and_parameter_units(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    from pantohil.builder.ssp import OMS, SSC, SSV
+
+    path = tmp_path / "hil.ssp"
+    proc = pantohil("build", "--ssp", str(path))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "SSP of 3 FMUs (catenary, rig, pantograph)" in proc.stdout
+    with zipfile.ZipFile(path) as z:
+        ssd = ET.fromstring(z.read("SystemStructure.ssd"))
+        ssv = ET.fromstring(z.read("resources/parameters.ssv"))
+    master = ssd.find(f".//{{{OMS}}}SimulationInformation/{{{OMS}}}FixedStepMaster")
+    assert master is not None and master.get("description") == "oms-ma" and float(master.get("stepSize")) == 0.001
+    values = {p.get("name"): p[0] for p in ssv.iter(f"{{{SSV}}}Parameter")}
+    assert values["catenary.speed"].get("unit") == "m/s" and values["pantograph.uplift_force"].get("unit") == "N"
+    delay = values["catenary.delay_steps"]
+    assert delay.tag == f"{{{SSV}}}Integer" and delay.get("unit") is None
+    used = {v.get("unit") for v in values.values() if v.get("unit")}
+    assert used == {u.get("name") for u in ssv.iter(f"{{{SSC}}}Unit")}
