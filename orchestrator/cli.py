@@ -1,17 +1,19 @@
 """The `pantohil` command line.
 
-Exit codes: 0 success; 1 a run that did not converge (diverged or reached its span limit);
-2 bad input (one line naming the key); 3 reserved for a lost hardware link.
+Exit codes: 0 success; 1 a run that did not converge (diverged, reached its span limit or lost
+contact); 2 bad input (one line naming the key); 3 a lost hardware link; 130 / 143 a run stopped by
+SIGINT / SIGTERM (its folder complete, status `interrupted`).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import shutil
 import signal
 import sys
 import tempfile
-from datetime import datetime
 from pathlib import Path
 
 from pantohil.models.case import CaseError, load_case
@@ -67,7 +69,8 @@ def _add_run_command(sub) -> None:
     """`pantohil run` and its options."""
     run = sub.add_parser("run", help="virtual HIL run of a case or of an SSP file written by `pantohil build --ssp`")
     _add_case_args(run, optional=True)
-    run.add_argument("--out", type=Path, help="run folder (default: runs/<case>-<time>)")
+    run.add_argument("--out", type=Path, help="run folder, new or empty (default: runs/<case>-<time>)")
+    run.add_argument("--overwrite", action="store_true", help="replace the contents of --out if it is not empty")
     run.add_argument("--master", choices=("fmpy", "libcosim"), default="fmpy",
                      help="co-simulation master: pantohil's fmpy master or OSP's libcosim (default fmpy)")
     run.add_argument("--hardware", metavar="HOST:PORT",
@@ -269,78 +272,90 @@ def _resume_case(args):
     return load_case(Path(meta["case_file"]), meta["overrides"]), state
 
 
-def _cmd_run(args) -> int:
-    from pantohil.orchestrator.hil_run import run_case
+def _hardware_endpoint(text: str | None) -> tuple[str, int] | None:
+    if text is None:
+        return None
+    import socket
 
-    system = None
-    resume = None
-    if args.resume is not None:
-        case, resume = _resume_case(args)
-        args.out = args.resume
-    elif args.case is not None and args.case.suffix == ".ssp":
-        from pantohil.builder.ssp import SspError, read_ssp, temporary_dir
+    from pantohil.fmus.udp_protocol import parse_endpoint
 
-        if any(not o.startswith("run.") for o in args.overrides):
-            raise CaseError("--set: an SSP file fixes its system; only run.* keys can be overridden")
-        if not args.case.exists():
-            raise CaseError(f"SSP file {args.case} does not exist")
-        try:
-            system = read_ssp(args.case, temporary_dir("pantohil_ssp_"))
-        except SspError as exc:
-            raise CaseError(str(exc)) from None
-        case = load_case(system["case_file"], args.overrides)
-    else:
-        case = load_case(args.case, args.overrides)
-    checkpoint_info = None  # an SSP run saves no checkpoint: its system lives in a temporary folder
-    if resume is not None:
-        checkpoint_info = {k: resume["meta"][k] for k in ("case_file", "overrides")}
-    elif system is None:
-        checkpoint_info = {"case_file": str(Path(case.source).resolve()), "overrides": list(args.overrides)}
-    hardware = None
-    if args.hardware is not None:
-        from pantohil.fmus.udp_protocol import parse_endpoint
+    try:
+        hardware = parse_endpoint(text)
+        socket.getaddrinfo(hardware[0], hardware[1], socket.AF_INET, socket.SOCK_DGRAM)
+    except ValueError as exc:
+        raise CaseError(f"--hardware: {exc}") from None
+    except OSError as exc:
+        raise CaseError(f"--hardware: cannot resolve {hardware[0]!r} ({exc.strerror})") from None
+    return hardware
 
-        import socket
 
-        try:
-            hardware = parse_endpoint(args.hardware)
-            socket.getaddrinfo(hardware[0], hardware[1], socket.AF_INET, socket.SOCK_DGRAM)
-        except ValueError as exc:
-            raise CaseError(f"--hardware: {exc}") from None
-        except OSError as exc:
-            raise CaseError(f"--hardware: cannot resolve {hardware[0]!r} ({exc.strerror})") from None
-    if args.live_wait and args.live is None:
-        raise CaseError("--live-wait: needs --live")
-    live = _live_endpoint(args.live) if args.live is not None else None
-    out = args.out or Path("runs") / f"{case.name}-{datetime.now():%Y%m%d-%H%M%S}"
-    result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system,
-                      hardware=hardware, realtime=args.realtime, rt_priority=args.rt_priority, live=live,
-                      live_wait=args.live_wait, checkpoint_info=checkpoint_info, resume=resume)
-    cf = result.get("contact_force", {})
-    print(f"{result['status']}: {result['message']}")
-    if cf:
-        print(f"contact force: mean {cf['mean_N']:.2f} N, std {cf['std_N']:.2f} N, "
-              f"20 Hz std {cf['filtered_20hz']['std_N']:.2f} N; "
-              f"{result['timing']['realtime_factor']:.1f}x real time")
-    if "realtime" in result:
-        rt = result["realtime"]
-        print(
-            f"real time ({rt['scheduling']}): {rt['deadline_misses']} of {rt['steps']} deadlines missed; lateness p50 "
-            f"{rt['lateness_us']['p50']:.0f} us, p99 {rt['lateness_us']['p99']:.0f} us, "
-            f"max {rt['lateness_us']['max']:.0f} us"
-        )
-    if "link" in result:
-        ln = result["link"]
-        print(
-            "link: "
-            + ", ".join(
-                f"{k} {ln[k]}"
-                for k in ("sent", "received", "lost", "late", "reordered", "duplicated", "malformed", "limited")
-            )
-        )
+def _print_run(result, out: Path) -> None:
+    print(f"{result.status}: {result.message}")
+    cf = result.contact_force
+    if cf is not None:
+        print(f"contact force: mean {cf.mean_N:.2f} N, std {cf.std_N:.2f} N, 20 Hz std {cf.filtered_20hz.std_N:.2f} N; "
+              f"{result.timing.realtime_factor:.1f}x real time")
+    if result.realtime is not None:
+        rt = result.realtime
+        late = rt["lateness_us"]
+        print(f"real time ({rt['scheduling']}): {rt['deadline_misses']} of {rt['steps']} deadlines missed; "
+              f"lateness p50 {late['p50']:.0f} us, p99 {late['p99']:.0f} us, max {late['max']:.0f} us")
+    if result.link is not None:
+        from pantohil.orchestrator.hil_run import LINK_COUNTERS
+
+        print("link: " + ", ".join(f"{k} {result.link[k]}" for k in LINK_COUNTERS))
     print(f"run folder: {out}")
-    if result["status"] == "link_lost":
-        print(f"pantohil: error: {result['message']}", file=sys.stderr)
+    if result.status in ("link_lost", "interrupted"):
+        print(f"pantohil: {'error: ' if result.status == 'link_lost' else ''}{result.message}", file=sys.stderr)
+
+
+def _cmd_run(args, stop) -> int:
+    from pantohil.orchestrator.hil_run import RunInterrupted, run_case
+    from pantohil.orchestrator.run_folder import RunFolderError, default_run_folder
+
+    with contextlib.ExitStack() as cleanup:
+        system = None
+        resume = None
+        if args.resume is not None:
+            case, resume = _resume_case(args)
+            args.out = args.resume
+        elif args.case is not None and args.case.suffix == ".ssp":
+            from pantohil.builder.ssp import SspError, read_ssp, temporary_dir
+
+            if any(not o.startswith("run.") for o in args.overrides):
+                raise CaseError("--set: an SSP file fixes its system; only run.* keys can be overridden")
+            if not args.case.is_file():
+                raise CaseError(f"SSP file {args.case} does not exist or is not a file")
+            unpacked = temporary_dir("pantohil_ssp_")
+            cleanup.callback(shutil.rmtree, unpacked, True)
+            try:
+                system = read_ssp(args.case, unpacked)
+            except SspError as exc:
+                raise CaseError(str(exc)) from None
+            case = load_case(system["case_file"], args.overrides)
+        else:
+            case = load_case(args.case, args.overrides)
+        checkpoint_info = None  # an SSP run saves no checkpoint: its system lives in a temporary folder
+        if resume is not None:
+            checkpoint_info = {k: resume["meta"][k] for k in ("case_file", "overrides")}
+        elif system is None:
+            checkpoint_info = {"case_file": str(Path(case.source).resolve()), "overrides": list(args.overrides)}
+        hardware = _hardware_endpoint(args.hardware)
+        if args.live_wait and args.live is None:
+            raise CaseError("--live-wait: needs --live")
+        live = _live_endpoint(args.live) if args.live is not None else None
+        out = args.out or default_run_folder(case.name)
+        try:
+            result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system,
+                              hardware=hardware, realtime=args.realtime, rt_priority=args.rt_priority,
+                              live=live, live_wait=args.live_wait, checkpoint_info=checkpoint_info, resume=resume,
+                              overwrite=args.overwrite, stop=stop)
+        except RunFolderError as exc:
+            raise CaseError(f"--out: {exc}") from None
+        except RunInterrupted as exc:
+            print(f"pantohil: {exc}", file=sys.stderr)
+            return 128 + stop.signum
+    _print_run(result, out)
     return result.exit_code
 
 
@@ -562,16 +577,26 @@ def _cmd_example(args) -> int:
 
 
 def _terminate(signum, frame):
-    raise KeyboardInterrupt  # a run closes its log and writes its summary, as on Ctrl-C
+    raise KeyboardInterrupt  # the commands other than `run` end on Ctrl-C or SIGTERM alike
 
 
 def main(argv: list[str] | None = None) -> int:
+    from pantohil.orchestrator.stopping import stop_on_signals
+
     signal.signal(signal.SIGTERM, _terminate)
     args = _parser().parse_args(argv)
-    handler = {"run": _cmd_run, "build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
+    if args.command == "run":  # a stop signal ends the run at a step boundary with a complete record
+        with stop_on_signals() as stop:
+            return _guarded(lambda a: _cmd_run(a, stop), args)
+    handler = {"build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
                "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary, "example": _cmd_example,
                "fem-sim": _cmd_fem_sim, "compare": _cmd_compare, "stability": _cmd_stability,
                "sweep": _cmd_sweep, "watch": _cmd_watch}[args.command]
+    return _guarded(handler, args)
+
+
+def _guarded(handler, args) -> int:
+    """Bad input: one line and exit 2; an FMU failure: one line and exit 1."""
     try:
         return handler(args)
     except (CaseError, CatenaryError, ProfileError, InputFileError) as exc:

@@ -92,9 +92,9 @@ class LivePublisher:
         """The WebSocket URL viewers connect to."""
         return f"ws://{self.host}:{self.port}"
 
-    def wait_for_viewer(self) -> None:
-        """Block until a client subscribes to a channel (Ctrl-C still stops the wait)."""
-        while not self._viewers.subscribed.wait(0.2):
+    def wait_for_viewer(self, stopped: Callable[[], bool] = lambda: False) -> None:
+        """Block until a client subscribes to a channel, or `stopped()` (a stop request of the run)."""
+        while not self._viewers.subscribed.wait(0.2) and not stopped():
             pass
 
     def span_closed(self, t_s: float, record: dict, force: np.ndarray, previous: np.ndarray | None) -> None:

@@ -49,25 +49,25 @@ def make_package(case: Case, out_dir: Path, overrides: list[str], progress: bool
     stage = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))  # same filesystem: atomic rename
     try:
         ref = run_case(case, stage / "_run", progress=progress)
-        if not ref["converged"]:
-            raise CaseError(f"case {case.name}: the reference run did not converge ({ref['message']})")
+        if not ref.converged:
+            raise CaseError(f"case {case.name}: the reference run did not converge ({ref.message})")
         (stage / "reference").mkdir()
         for name in ("summary.json", "steady_span.csv", "contact_force.png", "convergence.png"):
             shutil.copy2(stage / "_run" / name, stage / "reference" / name)
         fmus = {}
         (stage / "fmus").mkdir()
-        for p in ref["fmus"]:
+        for p in ref.fmus:
             fmus[Path(p).stem] = Path(shutil.copy2(p, stage / "fmus" / Path(p).name))
         make_ssp(case, fmus, stage / f"{case.name}.ssp", overrides)
-        steps = ref["spans"] * ref["samples_per_span"]
+        steps = ref.spans * ref.samples_per_span
         (stage / "system.json").write_text(json.dumps({
-            "ssp": f"{case.name}.ssp", "dt_s": ref["dt_s"], "steps": steps,
-            "samples_per_span": ref["samples_per_span"], "tolerance_N": 1e-6}, indent=1) + "\n")
+            "ssp": f"{case.name}.ssp", "dt_s": ref.dt_s, "steps": steps,
+            "samples_per_span": ref.samples_per_span, "tolerance_N": 1e-6}, indent=1) + "\n")
         shutil.copy2(TEMPLATES / "run_fmpy.py", stage / "run_fmpy.py")
         shutil.copy2(TEMPLATES / "requirements.txt", stage / "requirements.txt")
         readme = (TEMPLATES / "README.md").read_text()
         for key, value in {"CASE_NAME": case.name, "VERSION": build_fmus._version(), "STEPS": str(steps),
-                           "DT": repr(ref["dt_s"]), "DELAY": str(ref["hil"]["delay_steps"])}.items():
+                           "DT": repr(ref.dt_s), "DELAY": str(ref.hil["delay_steps"])}.items():
             readme = readme.replace(key, value)
         (stage / "README.md").write_text(readme)
         shutil.rmtree(stage / "_run")

@@ -7,8 +7,11 @@ finishes it by itself if the run's process dies, so a run that stops early stays
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import fcntl
 import multiprocessing as mp
+import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +21,7 @@ from .channels import EVENT_SCHEMAS, RowEncoder, encode_event, event_schema, gro
 from .pacing import background_priority
 
 
-CHUNK_BYTES = 1 << 18  # a chunk about every span of the default case: `pantohil watch` reads complete chunks
+CHUNK_BYTES = 1 << 16  # small chunks: a file cut short loses at most one; `pantohil watch` reads complete chunks
 
 
 class McapWriter:
@@ -77,24 +80,65 @@ class McapWriter:
 
 
 PIPE_BYTES = 1 << 20  # a span of samples fits: handing it over never blocks the stepping loop
+PR_SET_PDEATHSIG = 1
+PARENT_GONE_SIGNAL = signal.SIGUSR1
 
 
-def _writer_process(conn, path: str, groups: dict, metadata: dict | None) -> None:
+class _ParentGone(Exception):
+    pass
+
+
+_child = {"waiting": False, "parent_gone": False}
+
+
+def _on_parent_gone(_signum, _frame):
+    _child["parent_gone"] = True
+    if _child["waiting"]:  # only a blocking read is interrupted, never a write into the file
+        raise _ParentGone
+
+
+def _detach_from_parent(parent_pid: int) -> None:
+    """The writer outlives a Ctrl-C to the process group (it stops when its parent says so, or dies),
+    and is told by the kernel when its parent dies, even by SIGKILL."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    signal.signal(PARENT_GONE_SIGNAL, _on_parent_gone)
+    with contextlib.suppress(OSError, AttributeError):  # not Linux: the pipe's end of file still tells
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(PARENT_GONE_SIGNAL), 0, 0, 0)
+    if os.getppid() != parent_pid:  # died before prctl took effect
+        _child["parent_gone"] = True
+
+
+def _receive(conn):
+    """The next message; None at "close", at the end of the pipe, or once the parent is dead and the
+    pipe holds nothing more."""
+    try:
+        if _child["parent_gone"] and not conn.poll(0):
+            return None
+        _child["waiting"] = True
+        try:
+            msg = conn.recv()
+        finally:
+            _child["waiting"] = False
+    except _ParentGone:
+        return _receive(conn)
+    except (EOFError, OSError):  # the run's process is gone: finish what we have
+        return None
+    return None if msg[0] == "close" else msg
+
+
+def _writer_process(conn, send_end, parent_pid: int, path: str, groups: dict, metadata: dict | None) -> None:
+    send_end.close()  # only the parent may hold the writing end: its death is then an end of file here
+    _detach_from_parent(parent_pid)
     background_priority()  # the stepping loop and a rig emulator on this machine come first
     writer = McapWriter(Path(path), groups, metadata)
     try:
-        while True:
-            try:
-                msg = conn.recv()
-            except (EOFError, OSError):  # the run's process is gone: finish what we have
-                break
+        while (msg := _receive(conn)) is not None:
             if msg[0] == "block":
                 writer.write_block(*msg[1:])
             elif msg[0] == "event":
                 writer.write_event(*msg[1:])
-                writer.flush()
-            else:
-                break
+            writer.flush()
     finally:
         writer.close()
         conn.close()
@@ -112,7 +156,8 @@ class McapRecorder:
         recv, self._send = ctx.Pipe(duplex=False)
         with contextlib.suppress(OSError, AttributeError):  # the default pipe size only blocks logging longer
             fcntl.fcntl(self._send.fileno(), fcntl.F_SETPIPE_SZ, PIPE_BYTES)
-        self._proc = ctx.Process(target=_writer_process, args=(recv, str(path), groups, metadata),
+        self._proc = ctx.Process(target=_writer_process,
+                                 args=(recv, self._send, os.getpid(), str(path), groups, metadata),
                                  name="pantohil-mcap", daemon=False)
         self._proc.start()
         recv.close()

@@ -25,9 +25,9 @@ def main() -> None:
         run_case(case, Path(tmp) / "warmup", progress=False)  # builds (and caches) the FMUs
         for i in range(args.repeats):
             s = run_case(case, Path(tmp) / f"r{i}", progress=False)
-            rtf.append(s["timing"]["realtime_factor"])
-            wall.append(s["timing"]["wall_s"])
-            for fmu, us in s["timing"]["per_step_us"].items():
+            rtf.append(s.timing.realtime_factor)
+            wall.append(s.timing.wall_s)
+            for fmu, us in s.timing.per_step_us.items():
                 per_step.setdefault(fmu, []).append(us)
     steps = args.spans * case.samples_per_span
     print(

@@ -1,0 +1,103 @@
+"""Run folders: a run writes only into a new or empty folder (or replaces one whole when asked), holds a
+lock on it while it runs, and default folder names stay under runs/."""
+from __future__ import annotations
+
+import fcntl
+import os
+import re
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
+from datetime import datetime
+from pathlib import Path
+
+from pantohil.models.case import CaseError
+
+LOCK_NAME = ".pantohil-run.lock"
+RUNS_ROOT = Path("runs")
+
+
+class RunFolderError(CaseError):
+    """A run folder that cannot be used; one line naming it."""
+
+
+def safe_name(name: str) -> str:
+    """A case name as one folder name: no separators, no leading dots, only [A-Za-z0-9._-]."""
+    cleaned = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._-")
+    return cleaned[:80] or "case"
+
+
+def default_run_folder(case_name: str, root: Path = RUNS_ROOT, now: datetime | None = None) -> Path:
+    """runs/<case>-<date>-<time>, with a counter if that folder is already taken."""
+    stem = f"{safe_name(case_name)}-{(now or datetime.now()):%Y%m%d-%H%M%S}"
+    folder, n = root / stem, 1
+    while folder.exists():
+        n += 1
+        folder = root / f"{stem}-{n}"
+    return folder
+
+
+def _clear(folder: Path) -> None:
+    for entry in folder.iterdir():
+        if entry.name == LOCK_NAME:
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+
+
+def _lock(folder: Path) -> int:
+    try:
+        fd = os.open(folder / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise RunFolderError(f"run folder {folder}: cannot write into it ({exc.strerror})") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise RunFolderError(f"run folder {folder}: another run is writing into it") from None
+    return fd
+
+
+@contextmanager
+def claimed_run_folder(folder: Path, overwrite: bool = False, resume: bool = False) -> Iterator[Path]:
+    """Create or take `folder` for one run, locked until the run is done. A folder with anything in it
+    is refused unless `overwrite`, which empties it first, or `resume` (the run continues the one in it).
+    A folder created here and refused is removed."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise RunFolderError(f"run folder {folder}: exists and is not a folder")
+    created = not folder.exists()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RunFolderError(f"run folder {folder}: cannot create it ({exc.strerror})") from None
+    fd = _lock(folder)
+    try:
+        if not resume and any(e.name != LOCK_NAME for e in folder.iterdir()):
+            if not overwrite:
+                raise RunFolderError(f"run folder {folder}: exists and is not empty (overwrite replaces it whole)")
+            _clear(folder)
+        os.write(fd, f"{os.getpid()}\n".encode())
+    except BaseException:
+        _release(folder, fd)
+        if created:
+            shutil.rmtree(folder, ignore_errors=True)
+        raise
+    try:
+        yield folder
+    except CaseError:  # bad input found on the way: nothing half-written stays
+        if created:
+            shutil.rmtree(folder, ignore_errors=True)
+        elif not resume:
+            _clear(folder)
+        raise
+    finally:
+        _release(folder, fd)
+
+
+def _release(folder: Path, fd: int) -> None:
+    with suppress(OSError):
+        os.unlink(folder / LOCK_NAME)
+    os.close(fd)

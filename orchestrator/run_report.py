@@ -1,0 +1,143 @@
+"""The summarise stage of a HIL run: steady_span.csv, the dropper corrections, the plots, and the
+typed summary written last, atomically, as summary.json."""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict
+
+import numpy as np
+
+from pantohil.models.case import Case
+from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
+
+from . import report
+from .run_summary import ForceStatistics, RunSummary, Timing
+
+FILTER_HZ = 20.0
+
+
+def _catenary_summary(case: Case) -> dict:
+    if case.model == "pfem":
+        p = case.values["pfem"]
+        s = case.pfem_settings()
+        return {"model": "pfem", "span_m": case.span_m, "definition_file": str(case.definition_path),
+                "droppers_slacken": p["droppers"], "dropper_relaxation": p["dropper_relaxation"],
+                "dropper_harmonics": s.n_harmonics_dropper, "omega_max_rad_s": s.omega_max,
+                "grid_resolution": s.resolution, "taper": s.taper}
+    return {"model": "asm", "span_m": case.span_m, **asdict(case.catenary)}
+
+
+def _pantograph_summary(case: Case) -> dict:
+    p = case.pantograph
+    return {"model": p.model, "masses_kg": list(p.masses_kg), "stiffnesses_N_m": list(p.stiffnesses_N_m),
+            "dampings_Ns_m": list(p.dampings_Ns_m), "contact_stiffness_N_m": p.contact_stiffness_N_m,
+            "uplift_force_N": p.uplift_force_N, "contact_frequency_hz": p.contact_frequency_hz()}
+
+
+def _hil_summary(case: Case, plan: dict) -> dict:
+    return {"update": case.hil_update, "relaxation": case.relaxation,
+            "max_frequency_hz": case.values["hil"]["max_frequency_hz"], "harmonics": case.n_harmonics,
+            "ramp_steps": case.ramp_steps, "delay_compensation": case.delay_compensation, **plan}
+
+
+def _statistics(f: np.ndarray, filtered: np.ndarray) -> ForceStatistics:
+    return ForceStatistics(**force_statistics(f), filtered_20hz=ForceStatistics(**force_statistics(filtered)))
+
+
+def _reference(case: Case, f: np.ndarray):
+    """The closed form of an ASM case (Paper A eqs. 38-41) and the run's RMS distance to it."""
+    from .hil_run import closed_form_reference
+
+    ref = closed_form_reference(case)
+    err = rms((f - f.mean()) - (ref - ref.mean()))
+    return ref, {"model": "asm closed form (Paper A eqs. 38-41), same harmonics", "std_N": float(np.std(ref)),
+                 "rms_error_N": err, "rms_error_rel_std": err / max(float(np.std(ref)), 1e-12)}
+
+
+def _droppers(state, start: int, stop: int, plots: bool) -> dict:
+    from .hil_run import case_dropper_positions
+
+    case, master, out_dir = state.case, state.master, state.prepared.out_dir
+    n, dt = case.samples_per_span, case.dt_s
+    positions = case_dropper_positions(case)
+    names = [v for v in master.real_outputs["catenary"] if v.startswith("dropper_correction_")]
+    corr = np.column_stack([master.column("catenary", v, start, stop) for v in names])[:, :len(positions)]
+    np.savetxt(out_dir / "dropper_corrections.csv", np.column_stack([np.arange(n) * dt, corr]), delimiter=",",
+               header="t_s," + ",".join(f"dropper_{d + 1}_N" for d in range(len(positions))), comments="", fmt="%.9g")
+    if plots:
+        report.plot_dropper_corrections(out_dir / "dropper_corrections.png", dt, corr,
+                                        f"{case.name}: dropper correction forces, converged span")
+    return {"slack_steps": [int(c) for c in np.count_nonzero(corr > 0, axis=0)],
+            "max_correction_N": [float(c) for c in corr.max(axis=0)], "positions_m": positions}
+
+
+def _last_span(state, spans_done: int, plots) -> dict:
+    """steady_span.csv, the statistics of the last complete span, its reference and its plots."""
+    case, master, out_dir = state.case, state.master, state.prepared.out_dir
+    n, dt = case.samples_per_span, case.dt_s
+    start, stop = (spans_done - 1) * n, spans_done * n
+    f = master.column("catenary", "force_at_sample", start, stop)
+    labels = master.column("catenary", "sample_index", start, stop)
+    if not np.array_equal(labels, np.arange(n)):
+        raise RuntimeError("catenary sample labels out of step with the master")
+    report.write_steady_span(out_dir / "steady_span.csv", np.arange(n) * dt,
+                             master.column("catenary", "profile_at_sample", start, stop),
+                             master.column("catenary", "height_at_sample", start, stop), f)
+    filtered = lowpass_periodic(f, dt, FILTER_HZ)
+    out = {"contact_force": _statistics(f, filtered)}
+    ref = None
+    if case.model == "asm":
+        ref, out["reference"] = _reference(case, f)
+    elif case.values["pfem"]["droppers"]:
+        out["droppers"] = _droppers(state, start, stop, plots())
+    if plots():
+        overlay = [master.column("catenary", "force_at_sample", s * n, (s + 1) * n)
+                   for s in range(max(0, spans_done - 10), spans_done)]
+        report.plot_contact_force(out_dir / "contact_force.png", dt, overlay, ref, filtered,
+                                  f"{case.name}: {case.speed_kmh:.0f} km/h, {state.status} after {spans_done} spans")
+    return out
+
+
+def _final_status(state) -> tuple[str, str, str | None]:
+    """A stop requested after the stepping ended still makes the run `interrupted` (its folder was not
+    complete when it came)."""
+    stop = state.stop
+    if not stop.requested:
+        return state.status, state.message, None
+    if state.status == "interrupted":
+        return state.status, state.message, stop.signal_name
+    return "interrupted", (f"interrupted ({stop.signal_name}) while writing the run folder; the run had ended: "
+                           f"{state.message}"), stop.signal_name
+
+
+def summarise_run(state) -> RunSummary:
+    """Write the run folder's files, summary.json last and atomically, and return the summary."""
+    case, prepared, master = state.case, state.prepared, state.master
+    n, dt = case.samples_per_span, case.dt_s
+    mark = state.stop.count
+
+    def plots() -> bool:  # a stop during this stage skips the plots still to draw
+        return state.stop.count == mark
+
+    k = master.k if master is not None else 0
+    spans_done = k // n
+    sections = _last_span(state, spans_done, plots) if spans_done >= 1 else {}
+    history = state.monitor.history if state.monitor is not None else []
+    if history and plots():
+        report.plot_convergence(prepared.out_dir / "convergence.png", history, case.values["run"]["convergence_tol"],
+                                f"{case.name}: {case.hil_update}-by-{case.hil_update} updating, "
+                                f"mu_c = {case.relaxation}")
+    status, message, signal_name = _final_status(state)
+    wall = state.wall_s
+    timing = Timing(wall_s=wall, build_s=prepared.build_s, simulated_s=k * dt,
+                    realtime_factor=k * dt / wall if wall > 0 else math.inf, per_step_us=state.per_step_us)
+    summary = RunSummary(
+        case=case.name, master=prepared.options.master_kind, status=status, message=message, spans=spans_done,
+        samples_per_span=n, dt_s=dt, speed_kmh=case.speed_kmh, catenary=_catenary_summary(case),
+        pantograph=_pantograph_summary(case), rig=asdict(case.rig), hil=_hil_summary(case, prepared.plan),
+        timing=timing, topology=prepared.topology.name, fmus=[str(p) for p in prepared.fmus.values()],
+        convergence=history, stop_signal=signal_name, operators=prepared.operators, realtime=state.realtime,
+        link=state.link, live=state.live,
+        resumed_from_span=state.first_span if prepared.options.resume is not None else None, **sections)
+    report.write_json_atomic(prepared.out_dir / "summary.json", summary.to_dict())
+    return summary

@@ -1,0 +1,18 @@
+"""A pantograph that never touches the wire is not a converged test."""
+from __future__ import annotations
+
+import json
+
+from conftest import pantohil
+
+
+def test_a_span_without_contact_is_contact_lost(tmp_path):
+    out = tmp_path / "run"
+    # no uplift force: the head rests at the wire's static height and never presses on it
+    proc = pantohil("run", "--set", "pantograph.uplift_force_N=0", "--set", "run.max_spans=20", "--out", str(out),
+                    "--quiet")
+    s = json.loads((out / "summary.json").read_text())
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert s["status"] == "contact_lost" and not s["converged"] and not s["diverged"]
+    assert s["spans"] < 20 and f"span {s['spans'] - 1}" in s["message"]
+    assert s["contact_force"]["max_N"] == 0.0

@@ -1,0 +1,113 @@
+"""Run folders: new or empty, --overwrite replaces them whole, one run at a time, names under runs/."""
+from __future__ import annotations
+
+import json
+import multiprocessing as mp
+from datetime import datetime
+from pathlib import Path
+
+import pytest
+
+from pantohil.orchestrator.run_folder import (LOCK_NAME, RunFolderError, claimed_run_folder, default_run_folder,
+                                              safe_name)
+from pantohil.orchestrator.run_summary import RunSummary
+
+from conftest import pantohil
+
+
+def test_a_new_folder_is_made_and_left_without_its_lock(tmp_path):
+    with claimed_run_folder(tmp_path / "a" / "b") as folder:
+        assert (folder / LOCK_NAME).exists()
+        (folder / "x.txt").write_text("x")
+    assert sorted(p.name for p in folder.iterdir()) == ["x.txt"]
+
+
+def test_a_used_folder_is_refused_and_kept(tmp_path):
+    (tmp_path / "old.csv").write_text("1")
+    with pytest.raises(RunFolderError, match="exists and is not empty"), claimed_run_folder(tmp_path):
+        pass
+    assert (tmp_path / "old.csv").read_text() == "1"
+
+
+def test_overwrite_replaces_the_folder_whole(tmp_path):
+    (tmp_path / "old.csv").write_text("1")
+    (tmp_path / "plots").mkdir()
+    (tmp_path / "plots" / "a.png").write_text("")
+    with claimed_run_folder(tmp_path, overwrite=True) as folder:
+        assert [p.name for p in folder.iterdir()] == [LOCK_NAME]
+
+
+def _hold(folder: str, locked, release) -> None:
+    with claimed_run_folder(Path(folder)):
+        locked.set()
+        release.wait()
+
+
+def test_a_second_run_into_a_locked_folder_is_refused(tmp_path):
+    ctx = mp.get_context("spawn")
+    locked, release = ctx.Event(), ctx.Event()
+    holder = ctx.Process(target=_hold, args=(str(tmp_path / "run"), locked, release))
+    holder.start()
+    try:
+        assert locked.wait(120)
+        with pytest.raises(RunFolderError, match="another run is writing into it"), \
+                claimed_run_folder(tmp_path / "run", overwrite=True):
+            pass
+    finally:
+        release.set()
+        holder.join(120)
+    assert holder.exitcode == 0
+    with claimed_run_folder(tmp_path / "run"):  # free again
+        pass
+
+
+def test_a_file_is_not_a_run_folder(tmp_path):
+    (tmp_path / "f").write_text("")
+    with pytest.raises(RunFolderError, match="exists and is not a folder"), claimed_run_folder(tmp_path / "f"):
+        pass
+
+
+@pytest.mark.parametrize("name,expected", [("../../etc", "etc"), ("/abs/path", "abs_path"), ("..", "case"),
+                                           ("a b/c", "a_b_c"), (".hidden", "hidden"), ("asm_250", "asm_250")])
+def test_default_folder_names_stay_under_runs(tmp_path, name, expected):
+    now = datetime(2026, 1, 2, 3, 4, 5)
+    folder = default_run_folder(name, tmp_path / "runs", now)
+    assert safe_name(name) == expected
+    assert folder == tmp_path / "runs" / f"{expected}-20260102-030405"
+    folder.mkdir(parents=True)
+    assert default_run_folder(name, tmp_path / "runs", now).name == f"{expected}-20260102-030405-2"
+
+
+def test_the_cli_refuses_a_used_folder_or_a_file_in_one_line(tmp_path):
+    used = tmp_path / "used"
+    used.mkdir()
+    (used / "steady_span.csv").write_text("old")
+    (tmp_path / "file").write_text("")
+    for out, needle in ((used, "exists and is not empty"), (tmp_path / "file", "exists and is not a folder")):
+        proc = pantohil("run", "--out", str(out), "--quiet")
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1 and needle in lines[0], proc.stderr
+    assert (used / "steady_span.csv").read_text() == "old"
+    assert sorted(p.name for p in used.iterdir()) == ["steady_span.csv"]
+
+
+def test_a_case_name_with_a_path_runs_under_runs(tmp_path):
+    case = tmp_path / "case.toml"
+    text = (Path(__file__).resolve().parents[1] / "models" / "cases" / "asm_250.toml").read_text()
+    case.write_text(text.replace('name = "asm_250"', 'name = "../../escape"', 1))
+    assert 'name = "../../escape"' in case.read_text()
+    work = tmp_path / "work"
+    work.mkdir()
+    proc = pantohil("run", str(case), "--set", "run.max_spans=1", "--quiet", cwd=work)
+    assert proc.returncode == 1, proc.stderr
+    (folder,) = (work / "runs").iterdir()
+    assert folder.name.startswith("escape-")
+    assert not (tmp_path / "escape").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["case.toml", "work"]
+
+
+def test_the_summary_reads_back_by_attribute(default_run):
+    raw = json.loads((default_run / "summary.json").read_text())
+    s = RunSummary.read(default_run)
+    assert s.to_dict() == raw
+    assert s.converged and s.exit_code == 0 and s.contact_force.std_N == raw["contact_force"]["std_N"]
+    assert s.timing.realtime_factor == raw["timing"]["realtime_factor"]
