@@ -81,7 +81,8 @@ def compile_loader(model_identifier: str, time_step_vr: int, runtime: PythonRunt
         target = Path(tmp) / f"{model_identifier}.so"
         cmd = [compiler(), "-shared", "-fPIC", "-O2", "-std=c99", "-Wall", f"-I{FMI_HEADERS}",
                *(f"-D{k}={v}" for k, v in defines.items()), "-o", str(target), str(SOURCE), "-ldl", "-lm"]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
+        # a session of its own: a Ctrl-C to the run's process group does not kill the build under the run
+        proc = subprocess.run(cmd, capture_output=True, text=True, start_new_session=True)
         if proc.returncode != 0:
             first = (proc.stderr.strip().splitlines() or ["(no message)"])[0]
             raise LoaderError(f"compiling the FMU loader failed: {first}")

@@ -182,7 +182,10 @@ def test_link_loss_ends_the_run_with_exit_3_and_a_readable_log(tmp_path):
     run = subprocess.Popen([sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--hardware", emu.address,
                             "--realtime", "--out", str(out), "--quiet", "--set", "link.tolerated_losses=100"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(6.0)
+    log = out / "run.mcap"
+    while not (log.exists() and log.stat().st_size > 70_000):  # a span logged: the session is stepping
+        assert run.poll() is None, run.communicate()
+        time.sleep(0.05)
     emu.proc.kill()
     stdout, stderr = run.communicate(timeout=120)
     assert run.returncode == 3, stdout + stderr
