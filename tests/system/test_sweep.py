@@ -87,19 +87,42 @@ def test_speed_sweep_on_a_separate_scheduler_and_worker(tmp_path):
             p.wait(30)
 
 
+def _start_cluster(port):
+    """A scheduler and two single-thread workers, each in a process group of its own."""
+    sched = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                              "--port", str(port), "--no-dashboard"], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL, start_new_session=True)
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
+                               "--nworkers", "2", "--nthreads", "1", "--no-dashboard"], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)
+    from distributed import Client
+
+    with Client(f"tcp://127.0.0.1:{port}", timeout=60) as client:
+        client.wait_for_workers(2, timeout=300)
+    return sched, worker
+
+
 @pytest.mark.slow
 def test_an_interrupted_sweep_redoes_only_the_missing_points(tmp_path):
-    path, out = sweep_file(tmp_path), tmp_path / "sweep"
-    cmd = [sys.executable, "-m", "pantohil.orchestrator.cli", "sweep", str(path), "--workers", "2", "--out", str(out),
-           "--quiet"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.time() + 300
-    while time.time() < deadline:
-        if (out / "results.csv").exists() and len(rows_of(out)) >= 3:
-            break
-        time.sleep(0.2)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
+    # the interrupt comes while points are still to run: once 3 are done, the workers (and the runs
+    # they started) are frozen with SIGSTOP, so no machine is fast enough to finish the sweep first
+    path, out, port = sweep_file(tmp_path), tmp_path / "sweep", free_port()
+    sched, worker = _start_cluster(port)
+    try:
+        cmd = [sys.executable, "-m", "pantohil.orchestrator.cli", "sweep", str(path), "--scheduler",
+               f"tcp://127.0.0.1:{port}", "--out", str(out), "--quiet"]
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        while not ((out / "results.csv").exists() and len(rows_of(out)) >= 3):
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.1)
+        os.killpg(worker.pid, signal.SIGSTOP)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=600)
+    finally:
+        for p in (worker, sched):
+            os.killpg(p.pid, signal.SIGKILL)
+            os.killpg(p.pid, signal.SIGCONT)
+            p.wait(60)
     assert proc.returncode == 130, err
     first = {r["point"]: r for r in rows_of(out)}
     assert 3 <= len(first) < 12
