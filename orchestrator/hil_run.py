@@ -17,14 +17,21 @@ from contextlib import nullcontext, suppress
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from tqdm import tqdm
-
 from pantohil.builder.build_fmus import build_case_fmus
-from pantohil.builder.system import (CONNECTIONS, FMU_NAMES, HARDWARE_CONNECTIONS, HARDWARE_FMU_NAMES,
-                                     loop_latency_steps)
+from pantohil.builder.system import (
+    CONNECTIONS,
+    FMU_NAMES,
+    HARDWARE_CONNECTIONS,
+    HARDWARE_FMU_NAMES,
+    loop_latency_steps,
+)
 from pantohil.models.case import Case, CaseError
-from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, single_pantograph
+from pantohil.models.catenary.asm.closed_form import (
+    one_sided_harmonics,
+    single_pantograph,
+)
 from pantohil.models.hil.loop import ConvergenceMonitor
+from tqdm import tqdm
 
 from . import checkpoint
 from .master import JacobiMaster
@@ -198,16 +205,16 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
                          checkpoint_info, resume)
     topology = run_topology(case, options)
     plan = delay_plan(case, topology)  # validates before anything is written
-    with (stop_on_signals() if stop is None else nullcontext(stop)) as stop:
-        operators = _pfem_operators(case, options, stop)  # before the run folder: a bad operator file leaves nothing
-        if stop.requested:
+    with (stop_on_signals() if stop is None else nullcontext(stop)) as request:
+        operators = _pfem_operators(case, options, request)  # before the run folder: a bad operator file leaves nothing
+        if request.requested:
             raise RunInterrupted("interrupted before the run started: nothing written")
         with claimed_run_folder(out_dir, overwrite, resume=resume is not None) as folder:
             prepared = PreparedRun(case, folder, options, topology, plan, operators)
             live_view = [LiveObserver(live, live_wait)] if live is not None else []
-            state = RunState(prepared, stop, live_view + list(observers))
+            state = RunState(prepared, request, live_view + list(observers))
             prepare(prepared)
-            if stop.requested:
+            if request.requested:
                 state.status, state.message = "interrupted", "interrupted while the FMUs were built"
             else:
                 start(state)

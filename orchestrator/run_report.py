@@ -6,7 +6,6 @@ import math
 from dataclasses import asdict
 
 import numpy as np
-
 from pantohil.models.case import Case
 from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
 

@@ -3,9 +3,11 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from conftest import pantohil
 
 
+@pytest.mark.slow
 def test_a_span_without_contact_is_contact_lost(tmp_path):
     out = tmp_path / "run"
     # no uplift force: the head rests at the wire's static height and never presses on it

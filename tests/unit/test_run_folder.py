@@ -1,18 +1,19 @@
-"""Run folders: new or empty, --overwrite replaces them whole, one run at a time, names under runs/."""
+"""Run folders (orchestrator/run_folder.py): new or empty, overwrite replaces them whole, one run at a
+time (a lock), default names under runs/."""
 from __future__ import annotations
 
-import json
 import multiprocessing as mp
 from datetime import datetime
 from pathlib import Path
 
 import pytest
-
-from pantohil.orchestrator.run_folder import (LOCK_NAME, RunFolderError, claimed_run_folder, default_run_folder,
-                                              safe_name)
-from pantohil.orchestrator.run_summary import RunSummary
-
-from conftest import pantohil
+from pantohil.orchestrator.run_folder import (
+    LOCK_NAME,
+    RunFolderError,
+    claimed_run_folder,
+    default_run_folder,
+    safe_name,
+)
 
 
 def test_a_new_folder_is_made_and_left_without_its_lock(tmp_path):
@@ -76,38 +77,3 @@ def test_default_folder_names_stay_under_runs(tmp_path, name, expected):
     assert folder == tmp_path / "runs" / f"{expected}-20260102-030405"
     folder.mkdir(parents=True)
     assert default_run_folder(name, tmp_path / "runs", now).name == f"{expected}-20260102-030405-2"
-
-
-def test_the_cli_refuses_a_used_folder_or_a_file_in_one_line(tmp_path):
-    used = tmp_path / "used"
-    used.mkdir()
-    (used / "steady_span.csv").write_text("old")
-    (tmp_path / "file").write_text("")
-    for out, needle in ((used, "exists and is not empty"), (tmp_path / "file", "exists and is not a folder")):
-        proc = pantohil("run", "--out", str(out), "--quiet")
-        lines = proc.stderr.strip().splitlines()
-        assert proc.returncode == 2 and len(lines) == 1 and needle in lines[0], proc.stderr
-    assert (used / "steady_span.csv").read_text() == "old"
-    assert sorted(p.name for p in used.iterdir()) == ["steady_span.csv"]
-
-
-def test_a_case_name_with_a_path_runs_under_runs(tmp_path):
-    case = tmp_path / "case.toml"
-    text = (Path(__file__).resolve().parents[1] / "models" / "cases" / "asm_250.toml").read_text()
-    case.write_text(text.replace('name = "asm_250"', 'name = "../../escape"', 1))
-    assert 'name = "../../escape"' in case.read_text()
-    work = tmp_path / "work"
-    work.mkdir()
-    proc = pantohil("run", str(case), "--set", "run.max_spans=1", "--quiet", cwd=work)
-    assert proc.returncode == 1, proc.stderr
-    (folder,) = (work / "runs").iterdir()
-    assert folder.name.startswith("escape-")
-    assert not (tmp_path / "escape").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["case.toml", "work"]
-
-
-def test_the_summary_reads_back_by_attribute(default_run):
-    raw = json.loads((default_run / "summary.json").read_text())
-    s = RunSummary.read(default_run)
-    assert s.to_dict() == raw
-    assert s.converged and s.exit_code == 0 and s.contact_force.std_N == raw["contact_force"]["std_N"]
-    assert s.timing.realtime_factor == raw["timing"]["realtime_factor"]

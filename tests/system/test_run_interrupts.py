@@ -17,7 +17,6 @@ import pytest
 from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
-
 from pantohil.orchestrator.run_folder import LOCK_NAME
 
 SEED = 15

@@ -9,7 +9,6 @@ import zipfile
 from pathlib import Path
 
 import pytest
-
 from conftest import pantohil
 
 
@@ -73,6 +72,7 @@ def test_a_bad_member_is_refused_in_one_line(ssp, tmp_path, what, replace, needl
     assert list((tmp_path / "tmp").iterdir()) == []
 
 
+@pytest.mark.slow
 def test_a_run_of_an_ssp_leaves_no_temporary_folder(ssp, tmp_path):
     proc = _run([str(ssp), "--set", "run.max_spans=1", "--out", str(tmp_path / "run")], tmp_path / "tmp")
     assert proc.returncode == 1 and "span_limit" in proc.stdout, proc.stderr
