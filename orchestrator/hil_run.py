@@ -38,7 +38,7 @@ from .master import JacobiMaster
 from .pacing import Pacer, set_realtime_priority
 from .recorder import McapRecorder
 from .run_folder import claimed_run_folder
-from .run_observers import LiveObserver, McapObserver, RunObserver
+from .run_observers import CheckpointObserver, LiveObserver, McapObserver, RunObserver
 from .run_summary import EXIT_LINK_LOST, RunSummary
 from .stopping import StopRequest, stop_on_signals
 
@@ -212,7 +212,8 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
         with claimed_run_folder(out_dir, overwrite, resume=resume is not None) as folder:
             prepared = PreparedRun(case, folder, options, topology, plan, operators)
             live_view = [LiveObserver(live, live_wait)] if live is not None else []
-            state = RunState(prepared, request, live_view + list(observers))
+            saver = [CheckpointObserver(checkpoint_info)] if _saves_checkpoints(options, topology) else []
+            state = RunState(prepared, request, live_view + saver + list(observers))
             prepare(prepared)
             if request.requested:
                 state.status, state.message = "interrupted", "interrupted while the FMUs were built"

@@ -2,6 +2,7 @@
 scheduler and worker, interrupted and resumed; bad sweep input."""
 import csv
 import json
+import os
 import signal
 import socket
 import subprocess
