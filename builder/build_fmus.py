@@ -42,47 +42,19 @@ def cache_root() -> Path:
 
 def fmu_parameters(case: Case, delay_steps: int,
                    rig_address: tuple[str, int] = ("127.0.0.1", 47800)) -> dict[str, dict]:
-    """The case as FMU parameter values, by FMU."""
-    cat, pan, rig = case.catenary, case.pantograph, case.rig
-    link, act = case.values["link"], case.values["actuator"]
-    n = pan.n
-    def pad(xs):
-        return list(xs) + [0.0] * (3 - len(xs))
-    masses, stiff, damp = pad(pan.masses_kg), pad(pan.stiffnesses_N_m), pad(pan.dampings_Ns_m)
-    return {
-        "catenary": {
-            "span_length": case.span_m, "speed": case.speed_m_s, "time_step": case.dt_s,
-            "samples_per_span": case.samples_per_span, "tension": cat.tension_N, "density": cat.density_kg_m,
-            "support_stiffness": cat.support_stiffness_N_m2, "alpha": cat.alpha_1_s, "beta": cat.beta_s,
-            "max_frequency": case.values["hil"]["max_frequency_hz"],
-            "update_strategy": ("step", "span").index(case.hil_update), "relaxation": case.relaxation,
-            "ramp_steps": case.ramp_steps, "delay_steps": delay_steps,
-            "catenary_model": 1 if case.model == "pfem" else 0, "droppers": int(case.values["pfem"]["droppers"]),
-            "dropper_relaxation": case.values["pfem"]["dropper_relaxation"],
-        },
-        "pantograph": {
-            "pantograph_model": 1 if pan.model == "rigid_mass" else 0, "n_masses": n,
-            **{f"mass_{i + 1}": masses[i] for i in range(3)},
-            **{f"stiffness_{i + 1}": stiff[i] for i in range(3)},
-            **{f"damping_{i + 1}": damp[i] for i in range(3)},
-            "contact_stiffness": pan.contact_stiffness_N_m, "uplift_force": pan.uplift_force_N,
-            "reference_height": case.reference_height_m(), "gravity": pan.gravity_m_s2, "time_step": case.dt_s,
-        },
-        "rig": {
-            "delay_steps": rig.delay_steps, "comm_decimation": rig.comm_decimation,
-            "servo_bandwidth": rig.servo_bandwidth_hz, "servo_damping": rig.servo_damping,
-            "loadcell_cutoff": rig.loadcell_cutoff_hz, "force_offset": rig.force_offset_N,
-            "noise_std": rig.noise_std_N, "noise_seed": rig.noise_seed, "time_step": case.dt_s,
-        },
-        "adapter": {
-            "rig_host": rig_address[0], "rig_port": rig_address[1], "local_port": link["local_port"],
-            "receive_timeout": link["receive_timeout_s"], "tolerated_losses": link["tolerated_losses"],
-            "pipeline_steps": link["pipeline_steps"],
-            "stroke_min": act["stroke_min_m"], "stroke_max": act["stroke_max_m"],
-            "max_velocity": act["max_velocity_m_s"], "max_acceleration": act["max_acceleration_m_s2"],
-            "time_step": case.dt_s,
-        },
+    """The case as FMU parameter values, by FMU: every case key that reaches an FMU under its declared
+    name (models/parameters.py), and the quantities the FMUs take derived from the case."""
+    pan = case.pantograph
+    resolved = {"hil.delay_steps": delay_steps, "pantograph.uplift_force_N": pan.uplift_force_N,
+                "pantograph.masses_kg": pan.masses_kg, "pantograph.stiffnesses_N_m": pan.stiffnesses_N_m,
+                "pantograph.dampings_Ns_m": pan.dampings_Ns_m}
+    derived = {
+        "catenary": {"speed": case.speed_m_s, "time_step": case.dt_s, "samples_per_span": case.samples_per_span},
+        "pantograph": {"n_masses": pan.n, "reference_height": case.reference_height_m(), "time_step": case.dt_s},
+        "rig": {"time_step": case.dt_s},
+        "adapter": {"rig_host": rig_address[0], "rig_port": rig_address[1], "time_step": case.dt_s},
     }
+    return {name: {**fmu_support.case_values(name, case.values, resolved), **extra} for name, extra in derived.items()}
 
 
 def default_delay_steps(case: Case) -> int:

@@ -1,5 +1,7 @@
 """Declarative FMU variables: one table per FMU gives names, units, descriptions and ranges; the
 same table registers the variables with pythonfmu and lets the builder decorate modelDescription.xml.
+The variables that carry case keys are derived from the declarations in models/parameters.py
+(`case_variables`), named by its naming rule; a table adds only what the FMU itself defines.
 
 Case values reach the FMU through `resources/parameters.json`, read when the slave is created, so the
 FMU alone (in any master) reproduces the case; a master may still set parameters before initialising.
@@ -14,6 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
+
+from pantohil.models.parameters import AUTO, Key, fmu_keys, fmu_variable_names
 
 PARAMETERS_FILE = "parameters.json"
 REQUIREMENTS_FILE = "requirements.txt"  # what `pythonfmu deploy` installs on a host
@@ -40,6 +44,49 @@ class Var:
     start: float | int | bool = 0
     min: float | None = None
     max: float | None = None
+
+
+def _key_variables(key: Key) -> list[Var]:
+    p = key.param
+    names = fmu_variable_names(key)
+    if p.choices and isinstance(p.choices[0], str):
+        listed = ", ".join(f"{i}: {c}" for i, c in enumerate(p.choices))
+        return [Var(names[0], "integer", "parameter", "1", f"{p.description} ({listed})", 0, 0, len(p.choices) - 1)]
+    if key.type is bool:
+        return [Var(names[0], "integer", "parameter", "1", f"{p.description} (1: true, 0: false)", int(key.default), 0, 1)]
+    kind = "integer" if key.type is int else "real"
+    if p.fmu_items:
+        starts = list(key.default) + [0.0] * (p.fmu_items - len(key.default))
+        return [Var(n, kind, "parameter", p.unit, f"{p.description}: item {i + 1}", starts[i], p.low, p.high)
+                for i, n in enumerate(names)]
+    start = p.fmu_start if p.fmu_start is not None and (key.default is AUTO or not isinstance(key.default, (int, float))) \
+        else key.default
+    return [Var(names[0], kind, "parameter", p.unit, p.description, start, p.low, p.high)]
+
+
+def case_variables(fmu: str) -> list[Var]:
+    """The FMU parameters that carry case keys, from their declarations (models/parameters.py)."""
+    return [v for key in fmu_keys(fmu) for v in _key_variables(key)]
+
+
+def case_values(fmu: str, values: dict, resolved: dict) -> dict:
+    """{FMU variable: value} of the case keys that reach an FMU. `values` is the validated case
+    ({section: {key: value}}); `resolved` gives, by dotted key, the value in use where the case's
+    differs ("auto", or a list the model shortens)."""
+    out = {}
+    for key in fmu_keys(fmu):
+        value = resolved.get(key.dotted, values[key.section][key.name])
+        names = fmu_variable_names(key)
+        if key.param.choices and isinstance(key.param.choices[0], str):
+            out[names[0]] = key.param.choices.index(value)
+        elif key.type is bool:
+            out[names[0]] = int(value)
+        elif key.param.fmu_items:
+            padded = list(value) + [0.0] * (len(names) - len(value))
+            out.update(zip(names, padded, strict=True))
+        else:
+            out[names[0]] = value
+    return out
 
 
 def load_parameters(resources: str | None) -> dict:

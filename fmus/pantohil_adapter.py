@@ -10,13 +10,14 @@ in fault: the adapter keeps sending the last safe position and the master stops 
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import socket
 import time
 from collections import OrderedDict
 
 from pantohil.fmus import udp_protocol as proto
-from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
+from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
 from pantohil.models.rig.actuator import ActuatorLimits, Limiter
 import contextlib
 
@@ -24,42 +25,9 @@ LINK_OK, LINK_DEGRADED, LINK_FAULT = 0, 1, 2
 _WINDOW = 4096  # how many recent sequence numbers are remembered for late/duplicate detection
 
 VARIABLES = [
+    *case_variables("adapter"),
     Var("rig_host", "string", "parameter", "1", "Address of the rig controller", "127.0.0.1"),
     Var("rig_port", "integer", "parameter", "1", "UDP port of the rig controller", 47800, 1, 65535),
-    Var("local_port", "integer", "parameter", "1", "Local UDP port (0: any free port)", 0, 0, 65535),
-    Var("receive_timeout", "real", "parameter", "s", "How long a step waits for the awaited answer", 0.0003, 1e-6, 1.0),
-    Var(
-        "pipeline_steps",
-        "integer",
-        "parameter",
-        "1",
-        "1: use the answer to the previous command (one step of latency, no waiting on the network); "
-        "0: wait for this step's answer",
-        1,
-        0,
-        1,
-    ),
-    Var(
-        "tolerated_losses",
-        "integer",
-        "parameter",
-        "1",
-        "Consecutive missing answers before the link is in fault",
-        50,
-        0,
-    ),
-    Var("stroke_min", "real", "parameter", "m", "Lowest actuator position", -0.12),
-    Var("stroke_max", "real", "parameter", "m", "Highest actuator position", 0.12),
-    Var("max_velocity", "real", "parameter", "m/s", "Actuator velocity limit (LinMot PS10-70x240U: 5.4 m/s)", 5.4, 0.0),
-    Var(
-        "max_acceleration",
-        "real",
-        "parameter",
-        "m/s2",
-        "Actuator acceleration limit (force limit / moving mass)",
-        300.0,
-        0.0,
-    ),
     Var("time_step", "real", "parameter", "s", "Sampling time dt", 0.001, 1e-6),
     Var("height_command", "real", "input", "m", "Height commanded by the catenary model", 0.0),
     Var(
@@ -97,8 +65,8 @@ class PantohilAdapter(PantohilSlave):
         self._early = {}  # answers that came before their step awaited them (reordering)
 
     def exit_initialization_mode(self):
-        self._limiter = Limiter(ActuatorLimits(self.stroke_min, self.stroke_max, self.max_velocity,
-                                               self.max_acceleration), self.time_step, self.height_command)
+        self._limiter = Limiter(ActuatorLimits(**{f.name: getattr(self, f.name) for f in
+                                                  dataclasses.fields(ActuatorLimits)}), self.time_step, self.height_command)
         self.command_sent = self._limiter.z
         self.measured_force = math.nan
         self._peer = (self.rig_host, int(self.rig_port))
@@ -182,7 +150,7 @@ class PantohilAdapter(PantohilSlave):
             return True
         msg = self._early.pop(awaited, None)
         if msg is None:
-            msg = self._receive(time.perf_counter() + self.receive_timeout,
+            msg = self._receive(time.perf_counter() + self.receive_timeout_s,
                                 lambda m: m.type == proto.FORCE and m.seq == awaited)
             if msg is not None and self._early:  # it came after a later answer: a reordering
                 self.reordered += 1

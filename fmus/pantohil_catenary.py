@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
+from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
 from pantohil.models.catenary.asm.string import AsmParameters
 from pantohil.models.hil.loop import UPDATES, HilSettings, PeriodicHil
 from pantohil.models.catenary.pfem.operator_file import load_operators
@@ -18,9 +18,10 @@ from pantohil.models.catenary.receptance import asm_operator, harmonic_count, re
 PROFILE_FILE = "profile.csv"
 OPERATOR_FILE = "operators.npz"
 MAX_DROPPERS = 12
+ASM_FIELDS = ("tension_N", "density_kg_m", "support_stiffness_N_m2", "alpha_1_s", "beta_s")  # case keys = fields
 
 VARIABLES = [
-    Var("span_length", "real", "parameter", "m", "Span length L", 65.0, 1.0, 1000.0),
+    *case_variables("catenary"),
     Var("speed", "real", "parameter", "m/s", "Pantograph speed V", 69.44444444444444, 0.0, 200.0),
     Var(
         "time_step",
@@ -33,55 +34,6 @@ VARIABLES = [
         0.1,
     ),
     Var("samples_per_span", "integer", "parameter", "1", "Samples per span N = L / (V dt)", 936, 2),
-    Var("tension", "real", "parameter", "N", "String tension T", 31500.0, 0.0),
-    Var("density", "real", "parameter", "kg/m", "String linear density mu", 1.4735, 0.0),
-    Var("support_stiffness", "real", "parameter", "N/m2", "Visco-elastic support stiffness kbar", 51.15, 0.0),
-    Var("alpha", "real", "parameter", "1/s", "Rayleigh (Kelvin-Voigt) alpha", 0.0125, 0.0),
-    Var("beta", "real", "parameter", "s", "Rayleigh (Kelvin-Voigt) beta", 1e-4, 0.0),
-    Var("max_frequency", "real", "parameter", "Hz", "Highest harmonic kept in the height f_max", 25.0, 0.0),
-    Var(
-        "update_strategy",
-        "integer",
-        "parameter",
-        "1",
-        "0: step-by-step (Paper D eq. 2), 1: span-by-span (eq. 3)",
-        0,
-        0,
-        1,
-    ),
-    Var("relaxation", "real", "parameter", "1", "Relaxation mu_c (Paper D eq. 10)", 0.1, 0.0, 1.0),
-    Var("ramp_steps", "integer", "parameter", "1", "Initial ramp N_r in steps (0: none)", 0, 0),
-    Var("delay_steps", "integer", "parameter", "1", "Delay advance D in steps: the loop latency to compensate", 1, 0),
-    Var(
-        "catenary_model",
-        "integer",
-        "parameter",
-        "1",
-        "0: ASM2 (Papers A-B), 1: PFEM from resources/operators.npz (Papers C-D)",
-        0,
-        0,
-        1,
-    ),
-    Var(
-        "droppers",
-        "integer",
-        "parameter",
-        "1",
-        "PFEM: 1 dropper slackening (Paper C sec. 5), 0 linear catenary",
-        1,
-        0,
-        1,
-    ),
-    Var(
-        "dropper_relaxation",
-        "real",
-        "parameter",
-        "1",
-        "PFEM: relaxation of the dropper corrections mu_d (Paper D sec. 3.7)",
-        1.0,
-        0.0,
-        1.0,
-    ),
     Var(
         "contact_force",
         "real",
@@ -142,8 +94,8 @@ class PantohilCatenary(PantohilSlave):
     def exit_initialization_mode(self):
         """Build the operator (ASM2 from its parameters, or the PFEM operators in the resources) and the iteration."""
         n = int(self.samples_per_span)
-        self.harmonics = harmonic_count(self.max_frequency, n, self.time_step)
-        settings = HilSettings(UPDATES[self.update_strategy], self.relaxation, self.delay_steps, self.ramp_steps)
+        self.harmonics = harmonic_count(self.max_frequency_hz, n, self.time_step)
+        settings = HilSettings(UPDATES[self.hil_update], self.relaxation, self.delay_steps, self.ramp_steps)
         if self.catenary_model == 1:
             ops = load_operators(Path(self.resources) / OPERATOR_FILE)
             s = ops.settings
@@ -159,9 +111,9 @@ class PantohilCatenary(PantohilSlave):
             self._z0 = ops.z0
             self._hil = PfemHil(ops, settings, self.dropper_relaxation, bool(self.droppers))
         else:
-            cat = AsmParameters(self.tension, self.density, self.support_stiffness, self.alpha, self.beta)
+            cat = AsmParameters(**{f: getattr(self, f) for f in ASM_FIELDS})
             x = np.arange(n) * self.speed * self.time_step
-            self._z0 = read_profile_csv(Path(self.resources) / PROFILE_FILE, self.span_length).heights(x)
+            self._z0 = read_profile_csv(Path(self.resources) / PROFILE_FILE, self.span_m).heights(x)
             op = asm_operator(cat, self.speed, n, self.time_step, self.harmonics)
             self._hil = PeriodicHil(op, reduce_harmonics(self._z0, self.harmonics), settings)
         self._pfem = self.catenary_model == 1

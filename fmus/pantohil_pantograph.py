@@ -2,43 +2,12 @@
 or a rigid mass on the actuator (Paper A sec. 2, Paper B sec. 5.1)."""
 from __future__ import annotations
 
-from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
+from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
 from pantohil.models.pantograph.lumped import PantographParameters, make_pantograph
 
 VARIABLES = [
-    Var(
-        "pantograph_model",
-        "integer",
-        "parameter",
-        "1",
-        "0: mass chain with penalty contact, 1: rigid mass on the actuator",
-        0,
-        0,
-        1,
-    ),
+    *case_variables("pantograph"),
     Var("n_masses", "integer", "parameter", "1", "Masses in the chain, head first", 3, 1, 3),
-    *[
-        Var(f"mass_{i}", "real", "parameter", "kg", f"Mass {i}", m, 0.0)
-        for i, m in zip((1, 2, 3), (6.6, 5.8, 5.8), strict=False)
-    ],
-    *[
-        Var(
-            f"stiffness_{i}",
-            "real",
-            "parameter",
-            "N/m",
-            f"Element {i} stiffness (mass {i} to mass {i + 1} or ground)",
-            k,
-            0.0,
-        )
-        for i, k in zip((1, 2, 3), (7000.0, 14100.0, 80.0), strict=False)
-    ],
-    *[
-        Var(f"damping_{i}", "real", "parameter", "N.s/m", f"Element {i} damping", c, 0.0)
-        for i, c in zip((1, 2, 3), (0.0, 0.0, 70.0), strict=False)
-    ],
-    Var("contact_stiffness", "real", "parameter", "N/m", "Penalty contact stiffness k_c", 50000.0, 0.0),
-    Var("uplift_force", "real", "parameter", "N", "Static uplift force on the last mass", 130.0),
     Var(
         "reference_height",
         "real",
@@ -47,7 +16,6 @@ VARIABLES = [
         "Wire height at which the static contact force equals the uplift force",
         0.0,
     ),
-    Var("gravity", "real", "parameter", "m/s2", "Gravity felt by the rigid mass (load cell not tared)", 0.0, 0.0),
     Var("time_step", "real", "parameter", "s", "Integration step dt (equal to the communication step)", 0.001, 1e-6),
     Var("height", "real", "input", "m", "Actuator (contact-point) height at the end of the step", 0.0),
     Var("contact_force", "real", "output", "N", "Contact force on the wire (load-cell reading without the rig)", 0.0),
@@ -72,13 +40,13 @@ class PantohilPantograph(PantohilSlave):
         def pick(stem):
             return tuple(float(getattr(self, f"{stem}_{i}")) for i in range(1, n + 1))
         params = PantographParameters(
-            pick("mass"),
-            pick("stiffness"),
-            pick("damping"),
-            self.contact_stiffness,
-            self.uplift_force,
+            pick("masses_kg"),
+            pick("stiffnesses_N_m"),
+            pick("dampings_Ns_m"),
+            self.contact_stiffness_N_m,
+            self.uplift_force_N,
             "rigid_mass" if self.pantograph_model == 1 else "chain",
-            self.gravity,
+            self.gravity_m_s2,
         )
         self._model = make_pantograph(params, self.time_step, self.reference_height)
         self.contact_force = self._model.settle(self.height)

@@ -2,26 +2,13 @@
 filter, force offset and noise (Paper B sec. 4, Paper D secs. 2 and 5.1)."""
 from __future__ import annotations
 
-from pantohil.fmus.fmu_support import PantohilSlave, Var, register_all
+import dataclasses
+
+from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
 from pantohil.models.rig.chain import Rig, RigParameters
 
 VARIABLES = [
-    Var("delay_steps", "integer", "parameter", "1", "Pure delay of the height path in steps", 0, 0),
-    Var(
-        "comm_decimation",
-        "integer",
-        "parameter",
-        "1",
-        "N_com: one height of every N_com reaches the drive (1: all)",
-        1,
-        1,
-    ),
-    Var("servo_bandwidth", "real", "parameter", "Hz", "Servo natural frequency (0: ideal tracking)", 0.0, 0.0),
-    Var("servo_damping", "real", "parameter", "1", "Servo damping ratio", 0.7, 0.0),
-    Var("loadcell_cutoff", "real", "parameter", "Hz", "Load-cell low-pass cut-off (0: none)", 0.0, 0.0),
-    Var("force_offset", "real", "parameter", "N", "Force added to the measurement", 0.0),
-    Var("noise_std", "real", "parameter", "N", "Measurement noise standard deviation", 0.0, 0.0),
-    Var("noise_seed", "integer", "parameter", "1", "Seed of the measurement noise", 0, 0),
+    *case_variables("rig"),
     Var("time_step", "real", "parameter", "s", "Sampling time dt", 0.001, 1e-6),
     Var("height_command", "real", "input", "m", "Height commanded by the catenary model", 0.0),
     Var("true_force", "real", "input", "N", "Contact force at the pantograph", 0.0),
@@ -44,9 +31,7 @@ class PantohilRig(PantohilSlave):
         self._rig = None
 
     def _params(self) -> RigParameters:
-        return RigParameters(int(self.delay_steps), int(self.comm_decimation), self.servo_bandwidth,
-                             self.servo_damping, self.loadcell_cutoff, self.force_offset, self.noise_std,
-                             int(self.noise_seed))
+        return RigParameters(**{f.name: getattr(self, f.name) for f in dataclasses.fields(RigParameters)})
 
     def exit_initialization_mode(self):
         """Build the rig at its starting height and force, and output its latency in steps."""

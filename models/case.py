@@ -6,6 +6,7 @@ key, a value out of range or an inconsistent combination raises CaseError with o
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import re
 import tomllib
@@ -124,7 +125,7 @@ def _coerce(key: Key, value):
         return AUTO
     if p.choices:
         if isinstance(value, bool) != isinstance(p.choices[0], bool) or value not in p.choices:
-            raise CaseError(f"{name}: must be {p.range_text().replace(' | ', ' or ')} (got {value!r})")
+            raise CaseError(f"{name}: must be {p.range_text()} (got {value!r})")
         return value
     if key.type in (int, float):
         try:
@@ -321,7 +322,7 @@ def build_case(raw: dict, source: Path) -> Case:
     """
     v = validate(_fill_from_definition(raw, source))
     c, run, hil = v["catenary"], v["run"], v["hil"]
-    cat = AsmParameters(c["tension_N"], c["density_kg_m"], c["support_stiffness_N_m2"], c["alpha_1_s"], c["beta_s"])
+    cat = AsmParameters(**{f.name: c[f.name] for f in dataclasses.fields(AsmParameters)})
     speed = run["speed_kmh"] / 3.6
     if speed >= cat.wave_speed_m_s:
         raise CaseError(f"run.speed_kmh: {run['speed_kmh']:g} km/h is at or above the ASM wave speed "
@@ -339,8 +340,7 @@ def build_case(raw: dict, source: Path) -> Case:
                         f"frequency {nyquist:.1f} Hz of dt = {dt:.6g} s")
     pan = _check_pantograph(v)
     r = v["rig"]
-    rig = RigParameters(r["delay_steps"], r["comm_decimation"], r["servo_bandwidth_hz"], r["servo_damping"],
-                        r["loadcell_cutoff_hz"], r["force_offset_N"], r["noise_std_N"], r["noise_seed"])
+    rig = RigParameters(**r)
     if rig.latency_steps(dt) >= n:
         raise CaseError(f"rig.delay_steps: the rig's latency ({rig.latency_steps(dt)} steps) must be shorter "
                         f"than a span ({n} steps)")

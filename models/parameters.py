@@ -8,8 +8,10 @@ that receives it. The case schema and its validation (`models/case.py`), the FMU
 Naming rule (case keys, FMU variables and summary fields): a parameter has one name, `snake_case`,
 ending in its SI unit (`_m`, `_s`, `_N`, `_N_m`, `_kg_m`, `_hz`, `_1_s`, ...; none for a pure number
 or a choice), and it is the same in the case file (`[rig] servo_bandwidth_hz`), in the FMU's
-modelDescription.xml (`servo_bandwidth_hz`) and in summary.json. Speed is the one key given in km/h
-(`run.speed_kmh`), as railway engineers state it.
+modelDescription.xml (`servo_bandwidth_hz`) and in summary.json. A choice reaches an FMU as an
+Integer, the index of its value in the choices, named `<section>_<key>` (`catenary_model`,
+`pantograph_model`, `hil_update`); a list as one variable per item, `<key>_<i>` from 1
+(`masses_kg_1`). Speed is the one key given in km/h (`run.speed_kmh`), as railway engineers state it.
 
 A value written `"auto"` is computed by pantohil (it is the default where it is allowed); no number
 stands for "automatic".
@@ -43,13 +45,15 @@ class Param:
     low_open: bool = False
     high_open: bool = False
     choices: tuple = ()
-    fmu: str | None = None  # the FMU whose variable of the same name receives the value
+    fmu: str | None = None  # the FMU whose variable (named by the naming rule) receives the value
     auto: bool = False  # "auto" (computed by pantohil) is allowed, and is the default
+    fmu_items: int = 0  # a list reaches the FMU as this many variables <key>_1 ... (padded with 0)
+    fmu_start: float | None = None  # the FMU variable's start value where the key has no default number
 
     def range_text(self) -> str:
         """The range as a mathematician writes it, e.g. `(0, 1e+06]`."""
         if self.choices:
-            return " | ".join(json_like(c) for c in self.choices)
+            return " or ".join(json_like(c) for c in self.choices)
         if self.low is None and self.high is None:
             return "any"
         lo = "-inf" if self.low is None else f"{self.low:g}"
@@ -75,9 +79,9 @@ def json_like(value) -> str:
 
 
 def param(default, unit: str, description: str, low=None, high=None, *, low_open=False, high_open=False,
-          choices=(), fmu=None, auto=False):
+          choices=(), fmu=None, auto=False, fmu_items=0, fmu_start=None):
     """A dataclass field declaring one case key."""
-    meta = Param(unit, description, low, high, low_open, high_open, tuple(choices), fmu, auto)
+    meta = Param(unit, description, low, high, low_open, high_open, tuple(choices), fmu, auto, fmu_items, fmu_start)
     if isinstance(default, (list, tuple)):
         return field(default=tuple(default), metadata={"param": meta})
     return field(default=default, metadata={"param": meta})
@@ -99,12 +103,13 @@ class CatenarySection:
                        choices=("asm", "pfem"), fmu="catenary")
     definition_file: str = param("", "1", "catenary file (relative to the case): ASM2 fitted to its FE model, "
                                           "or the span of the PFEM")
-    span_m: float = param(REQUIRED, "m", "span length L", 1.0, 1000.0, fmu="catenary")
-    tension_N: float = param(REQUIRED, "N", "contact-wire tension T", 0.0, 1e6, low_open=True, fmu="catenary")
+    span_m: float = param(REQUIRED, "m", "span length L", 1.0, 1000.0, fmu="catenary", fmu_start=65.0)
+    tension_N: float = param(REQUIRED, "N", "contact-wire tension T", 0.0, 1e6, low_open=True, fmu="catenary",
+                            fmu_start=31500.0)
     density_kg_m: float = param(REQUIRED, "kg/m", "string linear density mu", 0.0, 100.0, low_open=True,
-                                fmu="catenary")
+                                fmu="catenary", fmu_start=1.4735)
     support_stiffness_N_m2: float = param(REQUIRED, "N/m2", "visco-elastic support stiffness kbar", 0.0, 1e6,
-                                          low_open=True, fmu="catenary")
+                                          low_open=True, fmu="catenary", fmu_start=51.15)
     alpha_1_s: float = param(0.0125, "1/s", "Rayleigh alpha", 0.0, 100.0, fmu="catenary")
     beta_s: float = param(1e-4, "s", "Rayleigh beta", 0.0, 1.0, fmu="catenary")
 
@@ -127,14 +132,17 @@ class PantographSection:
     """[pantograph]: the lumped pantograph (Paper A sec. 2, Table A.3)."""
 
     model: str = param("chain", "1", "pantograph model", choices=("chain", "rigid_mass"), fmu="pantograph")
-    masses_kg: tuple = param((6.6, 5.8, 5.8), "kg", "masses, head first", 0.0, 1000.0, low_open=True)
-    stiffnesses_N_m: tuple = param((7000.0, 14100.0, 80.0), "N/m", "element stiffnesses", 0.0, 1e8)
-    dampings_Ns_m: tuple = param((0.0, 0.0, 70.0), "N.s/m", "element dampings", 0.0, 1e6)
+    masses_kg: tuple = param((6.6, 5.8, 5.8), "kg", "masses, head first", 0.0, 1000.0, low_open=True,
+                             fmu="pantograph", fmu_items=3)
+    stiffnesses_N_m: tuple = param((7000.0, 14100.0, 80.0), "N/m", "element stiffnesses (mass i to mass i+1 or "
+                                   "ground)", 0.0, 1e8, fmu="pantograph", fmu_items=3)
+    dampings_Ns_m: tuple = param((0.0, 0.0, 70.0), "N.s/m", "element dampings", 0.0, 1e6, fmu="pantograph",
+                                 fmu_items=3)
     contact_stiffness_N_m: float = param(50000.0, "N/m", "penalty contact stiffness k_c", 0.0, 1e8,
                                          low_open=True, fmu="pantograph")
     uplift_force_N: float = param(AUTO, "N", "static uplift force; \"auto\": F_m = 0.00097 v^2 + 70 (EN 50367, "
                                              "Paper A eq. 37)", 0.0, 2000.0, low_open=True, fmu="pantograph",
-                                  auto=True)
+                                  auto=True, fmu_start=130.0)
     gravity_m_s2: float = param(0.0, "m/s2", "gravity felt by a rigid mass (load cell not tared)", 0.0, 100.0,
                                 fmu="pantograph")
 
@@ -190,7 +198,8 @@ class HilSection:
     ramp_steps: int = param(0, "1", "initial ramp N_r [steps]", 0, 100_000_000, fmu="catenary")
     delay_compensation: bool = param(True, "1", "advance the height by the rig's latency")
     delay_steps: int = param(AUTO, "1", "delay advance D [steps]; \"auto\": the loop latency of the master plus "
-                                        "the rig's (Paper D sec. 3.4)", 0, 100_000, fmu="catenary", auto=True)
+                                        "the rig's (Paper D sec. 3.4)", 0, 100_000, fmu="catenary", auto=True,
+                             fmu_start=1)
 
 
 @dataclass(frozen=True)
@@ -262,6 +271,15 @@ def all_keys() -> list[Key]:
 def fmu_keys(fmu: str) -> list[Key]:
     """The case keys that reach an FMU, as variables of the same name."""
     return [k for k in all_keys() if k.param.fmu == fmu]
+
+
+def fmu_variable_names(key: Key) -> list[str]:
+    """The FMU variables a case key reaches (naming rule in the module docstring)."""
+    if key.param.choices and isinstance(key.param.choices[0], str):
+        return [f"{key.section}_{key.name}"]
+    if key.param.fmu_items:
+        return [f"{key.name}_{i}" for i in range(1, key.param.fmu_items + 1)]
+    return [key.name]
 
 
 def is_finite_number(x) -> bool:

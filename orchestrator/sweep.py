@@ -90,7 +90,7 @@ def _check_key(path: Path, key: str, kind: str, where: str) -> None:
         return
     section, _, name = key.partition(".")
     if section not in SCHEMA or name not in SCHEMA[section]:
-        _fail(path, f"{where} key {key!r} is not a case key (section.key, see models/case.py)")
+        _fail(path, f"{where} key {key!r} is not a case key (section.key, see docs/case-reference.md)")
 
 
 def _toml_value(v) -> str:

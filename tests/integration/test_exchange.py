@@ -31,7 +31,7 @@ def test_ssp_has_the_fmus_connections_and_parameters(ssp):
         ("catenary", "height_command", "rig", "height_command"), ("rig", "actuator_height", "pantograph", "height"),
         ("pantograph", "contact_force", "rig", "true_force"), ("rig", "measured_force", "catenary", "contact_force")}
     names = {p.name for b in system.parameterBindings for s in b.parameterValues for p in s.parameters}
-    assert {"catenary.delay_steps", "pantograph.uplift_force", "rig.delay_steps"} <= names
+    assert {"catenary.delay_steps", "pantograph.uplift_force_N", "rig.delay_steps"} <= names
     with zipfile.ZipFile(ssp) as z:
         assert {"resources/catenary.fmu", "resources/rig.fmu", "resources/pantograph.fmu",
                 "resources/case.toml"} <= set(z.namelist())
