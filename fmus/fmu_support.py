@@ -53,14 +53,15 @@ def _key_variables(key: Key) -> list[Var]:
         listed = ", ".join(f"{i}: {c}" for i, c in enumerate(p.choices))
         return [Var(names[0], "integer", "parameter", "1", f"{p.description} ({listed})", 0, 0, len(p.choices) - 1)]
     if key.type is bool:
-        return [Var(names[0], "integer", "parameter", "1", f"{p.description} (1: true, 0: false)", int(key.default), 0, 1)]
+        described = f"{p.description} (1: true, 0: false)"
+        return [Var(names[0], "integer", "parameter", "1", described, int(key.default), 0, 1)]
     kind = "integer" if key.type is int else "real"
     if p.fmu_items:
         starts = list(key.default) + [0.0] * (p.fmu_items - len(key.default))
         return [Var(n, kind, "parameter", p.unit, f"{p.description}: item {i + 1}", starts[i], p.low, p.high)
                 for i, n in enumerate(names)]
-    start = p.fmu_start if p.fmu_start is not None and (key.default is AUTO or not isinstance(key.default, (int, float))) \
-        else key.default
+    no_number = key.default is AUTO or not isinstance(key.default, (int, float))
+    start = p.fmu_start if p.fmu_start is not None and no_number else key.default
     return [Var(names[0], kind, "parameter", p.unit, p.description, start, p.low, p.high)]
 
 

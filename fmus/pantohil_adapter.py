@@ -65,8 +65,8 @@ class PantohilAdapter(PantohilSlave):
         self._early = {}  # answers that came before their step awaited them (reordering)
 
     def exit_initialization_mode(self):
-        self._limiter = Limiter(ActuatorLimits(**{f.name: getattr(self, f.name) for f in
-                                                  dataclasses.fields(ActuatorLimits)}), self.time_step, self.height_command)
+        limits = ActuatorLimits(**{f.name: getattr(self, f.name) for f in dataclasses.fields(ActuatorLimits)})
+        self._limiter = Limiter(limits, self.time_step, self.height_command)
         self.command_sent = self._limiter.z
         self.measured_force = math.nan
         self._peer = (self.rig_host, int(self.rig_port))
