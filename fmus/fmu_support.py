@@ -36,6 +36,7 @@ DISPLAY_UNITS = {"m": ("mm", 1000.0), "m/s": ("km/h", 3.6), "N/m": ("kN/m", 1e-3
 
 @dataclass(frozen=True)
 class Var:
+    """One FMU variable: name, type, causality, unit, description, start value and range."""
     name: str
     kind: str  # "real" | "integer" | "boolean" | "string"
     causality: str  # "parameter" | "input" | "output"
@@ -91,6 +92,7 @@ def case_values(fmu: str, values: dict, resolved: dict) -> dict:
 
 
 def load_parameters(resources: str | None) -> dict:
+    """The case values an FMU carries in resources/parameters.json (empty if there are none)."""
     if not resources:
         return {}
     path = Path(resources) / PARAMETERS_FILE

@@ -49,6 +49,7 @@ VARIABLES = [
 
 
 class PantohilAdapter(PantohilSlave):
+    """The hardware adapter FMU: the UDP link to a rig controller, within the actuator's limits."""
     author = "pantohil"
     description = "Hardware adapter: UDP link from the catenary model to a HIL rig controller, with actuator limits."
     transient = ("_sock",)  # a state restores the counters and the limiter, not the socket
@@ -65,6 +66,7 @@ class PantohilAdapter(PantohilSlave):
         self._early = {}  # answers that came before their step awaited them (reordering)
 
     def exit_initialization_mode(self):
+        """Open the link: the limiter at the starting height, the socket, HELLO until the rig answers STATUS."""
         limits = ActuatorLimits(**{f.name: getattr(self, f.name) for f in dataclasses.fields(ActuatorLimits)})
         self._limiter = Limiter(limits, self.time_step, self.height_command)
         self.command_sent = self._limiter.z
@@ -130,6 +132,11 @@ class PantohilAdapter(PantohilSlave):
             self._answered.popitem(last=False)
 
     def do_step(self, current_time, step_size):
+        """Send this step's COMMAND (limited, or the held position on a fault) and take the rig's FORCE.
+
+        By default the answer used is the one to the previous command, so a step never waits on the network;
+        a missing answer makes the force NaN, and more than tolerated_losses in a row a link fault.
+        """
         self._seq += 1
         seq = self._seq
         if self.link_state == LINK_FAULT:
@@ -177,6 +184,7 @@ class PantohilAdapter(PantohilSlave):
         return True
 
     def terminate(self):
+        """Send BYE to the rig and close the socket."""
         if self._sock is not None:
             with contextlib.suppress(OSError):
                 self._sock.sendto(proto.encode(proto.Message(proto.BYE, self._seq + 1, 0)), self._peer)

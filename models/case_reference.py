@@ -63,6 +63,7 @@ def reference_markdown() -> str:
 
 
 def main(argv: list[str]) -> int:
+    """Write the case-key reference (default docs/case-reference.md) from the declarations."""
     target = Path(argv[0]) if argv else Path("docs/case-reference.md")
     target.write_text(reference_markdown(), encoding="utf-8")
     print(f"written {target}")

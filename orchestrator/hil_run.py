@@ -55,6 +55,7 @@ _CATENARY_GROUP = {"height_command": "commanded height [m]", "contact_force": "f
 
 @dataclass(frozen=True)
 class Topology:
+    """A co-simulation system: its FMUs, connections and the MCAP groups logged."""
     name: str
     fmus: tuple
     connections: tuple
@@ -139,10 +140,12 @@ class RunState:
 
     @property
     def case(self) -> Case:
+        """The case being run."""
         return self.prepared.case
 
     @property
     def topology(self) -> Topology:
+        """The system being stepped."""
         return self.prepared.topology
 
 
@@ -169,6 +172,7 @@ def closed_form_reference(case: Case):
 
 
 def case_dropper_positions(case: Case) -> list:
+    """Dropper positions of the case's catenary file within a span [m]."""
     from pantohil.models.catenary.fe.definition import load_definition
 
     return [float(x) for x in load_definition(case.definition_path).dropper_positions_m]

@@ -24,15 +24,19 @@ class RunObserver:
         cls.wants_steps = cls.on_step is not RunObserver.on_step
 
     def on_start(self, run) -> None:
+        """Called once, after the master is up and before the first step."""
         pass
 
     def on_step(self, run, k: int) -> None:
+        """Called after step k (only for observers that override it)."""
         pass
 
     def on_span(self, run, span: int, record: dict) -> None:
+        """Called after each complete span with its convergence record."""
         pass
 
     def on_end(self, run) -> None:
+        """Called once when stepping is over, for any reason."""
         pass
 
 
@@ -82,6 +86,7 @@ class McapObserver(RunObserver):
         self.logged_steps = 0
 
     def on_start(self, run) -> None:
+        """Open run.mcap with the channels of the topology."""
         self.logged_steps = run.master.k  # a resumed run logs from its first new step on
 
     def _log_to(self, master, stop: int) -> None:
@@ -89,12 +94,14 @@ class McapObserver(RunObserver):
         self.logged_steps = max(self.logged_steps, stop)
 
     def on_span(self, run, span: int, record: dict) -> None:
+        """Log the span's steps, its /convergence record and its /span_force."""
         self._log_to(run.master, run.master.k)
         t_s = run.master.k * self.dt_s
         self.recorder.write_event("/convergence", t_s, record)
         self.recorder.write_event("/span_force", t_s, span_force_record(span, self.dt_s, *span_forces(run, span)))
 
     def on_end(self, run) -> None:
+        """Log the steps of a span cut short and finish run.mcap."""
         try:
             if run.master is not None:
                 self._log_to(run.master, run.master.k)
@@ -112,6 +119,7 @@ class LiveObserver(RunObserver):
         self.publisher = None
 
     def on_start(self, run) -> None:
+        """Start the WebSocket server; with `wait`, wait until a viewer subscribes or a stop is asked."""
         from pantohil.models.case import CaseError
 
         from .live import LivePublisher
@@ -131,9 +139,11 @@ class LiveObserver(RunObserver):
             self.publisher.wait_for_viewer(lambda: run.stop.requested)
 
     def on_span(self, run, span: int, record: dict) -> None:
+        """Publish the span's /convergence and /span_force."""
         self.publisher.span_closed(run.master.k * run.case.dt_s, record, *span_forces(run, span))
 
     def on_end(self, run) -> None:
+        """Stop the server and keep its summary for summary.json."""
         if self.publisher is not None:
             self.publisher.close()
             run.live = self.publisher.summary()
@@ -147,11 +157,13 @@ class CheckpointObserver(RunObserver):
         self.info = None
 
     def on_start(self, run) -> None:
+        """Record the digests of the run's FMUs, which a checkpoint must match to be resumed."""
         from . import checkpoint
 
         self.info = {**self.run_info, "fmu_digests": checkpoint.fmu_digests(run.prepared.fmus)}
 
     def on_span(self, run, span: int, record: dict) -> None:
+        """Save every FMU's state and the convergence record after the span (state/checkpoint.*)."""
         from . import checkpoint
 
         checkpoint.save(run.prepared.out_dir, run.master, run.monitor, span, self.info)

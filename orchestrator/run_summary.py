@@ -29,11 +29,13 @@ class ForceStatistics:
 
     @classmethod
     def from_dict(cls, d: dict) -> ForceStatistics:
+        """The statistics as read from summary.json."""
         inner = d.get("filtered_20hz")
         return cls(d["mean_N"], d["std_N"], d["max_N"], d["min_N"],
                    cls.from_dict(inner) if inner is not None else None)
 
     def to_dict(self) -> dict:
+        """The statistics as written to summary.json (with `filtered_20hz` if present)."""
         out = {"mean_N": self.mean_N, "std_N": self.std_N, "max_N": self.max_N, "min_N": self.min_N}
         if self.filtered_20hz is not None:
             out["filtered_20hz"] = self.filtered_20hz.to_dict()
@@ -83,10 +85,12 @@ class RunSummary:
 
     @property
     def converged(self) -> bool:
+        """Whether the run converged."""
         return self.status == "converged"
 
     @property
     def diverged(self) -> bool:
+        """Whether the run diverged."""
         return self.status == "diverged"
 
     @property
@@ -99,6 +103,7 @@ class RunSummary:
         return EXIT_CONVERGED if self.converged else EXIT_NOT_CONVERGED
 
     def to_dict(self) -> dict:
+        """The summary as written to summary.json (fields that are None left out)."""
         out = {"case": self.case, "master": self.master, "status": self.status, "message": self.message,
                "converged": self.converged, "diverged": self.diverged}
         for f in fields(self):
@@ -114,6 +119,7 @@ class RunSummary:
 
     @classmethod
     def from_dict(cls, d: dict) -> RunSummary:
+        """The summary as read from summary.json (unknown keys ignored)."""
         known = {f.name for f in fields(cls)}
         values = {k: v for k, v in d.items() if k in known}
         values["timing"] = Timing(**d["timing"])

@@ -20,18 +20,22 @@ class StopRequest:
 
     @property
     def requested(self) -> bool:
+        """Whether a stop was asked for."""
         return self.signum is not None
 
     @property
     def signal_name(self) -> str | None:
+        """Name of the signal that asked for the stop (None if none did)."""
         return signal.Signals(self.signum).name if self.signum is not None else None
 
     def request(self, signum: int = signal.SIGINT) -> None:
+        """Ask for a stop (the first signal is the one reported); counts the requests."""
         if self.signum is None:
             self.signum = int(signum)
         self.count += 1
 
     def on_signal(self, signum: int, _frame) -> None:
+        """Signal handler: ask for a stop, and interrupt at once where that is safe."""
         self.request(signum)
         if self._interruptible:
             raise KeyboardInterrupt
