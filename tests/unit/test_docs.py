@@ -1,4 +1,4 @@
-"""The documentation points at things that exist: every test it cites and every file it names.
+"""The documentation points at things that exist: every test it cites, every file it names, every link.
 
 README.md stays an introduction of at most 150 lines; the documents of docs/ exist.
 """
@@ -14,6 +14,7 @@ ROOT = Path(__file__).resolve().parents[2]
 DOCUMENTS = ("user-guide.md", "method.md", "validation.md", "benchmarks.md", "udp-protocol.md")
 PAGES = [ROOT / "README.md", ROOT / "CHANGELOG.md"] + sorted((ROOT / "docs").glob("*.md"))
 TEST_ID = re.compile(r"(tests/[\w/]+\.py)::(\w+)")
+LINK = re.compile(r"\]\(([^)#\s]+)(?:#[^)]*)?\)")
 REPO_PATH = re.compile(r"`((?:models|fmus|builder|orchestrator|tests|docs)/[\w./-]+\.(?:py|toml|json|md|csv))`")
 
 
@@ -49,3 +50,10 @@ def test_every_named_file_exists(page: Path):
     named = REPO_PATH.findall(page.read_text(encoding="utf-8"))
     missing = sorted({p for p in named if not (ROOT / p).exists()})
     assert not missing, f"{_ids(page)} names files that do not exist: {missing}"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=_ids)
+def test_every_relative_link_resolves(page: Path):
+    links = [t for t in LINK.findall(page.read_text(encoding="utf-8")) if "://" not in t]
+    missing = [t for t in links if not (page.parent / t).exists()]
+    assert not missing, f"{_ids(page)} links to files that do not exist: {missing}"
