@@ -110,6 +110,25 @@ def test_c_host_names_a_missing_libpython(host, default_run, tmp_path):
     assert len(logged) == 1 and "needs libpython" in logged[0] and "PANTOHIL_LIBPYTHON" in logged[0]
 
 
+SYSTEM_LIBPYTHON = Path("/usr/lib/x86_64-linux-gnu/libpython3.11.so.1.0")  # Debian's, without numpy here
+
+
+@pytest.mark.slow
+def test_c_host_names_numpy_when_the_python_lacks_it(host, default_run, tmp_path):
+    has_numpy = subprocess.run(["/usr/bin/python3.11", "-c", "import numpy"], capture_output=True).returncode == 0 \
+        if Path("/usr/bin/python3.11").exists() else True
+    if not SYSTEM_LIBPYTHON.exists() or has_numpy:
+        pytest.skip("needs a shared libpython 3.11 without numpy (Debian's python3.11)")
+    fmus = {name: default_run / "fmus" / f"{name}.fmu" for name in FMU_NAMES}
+    plan = _plan(fmus, tmp_path, 1, 1)
+    env = {k: v for k, v in os.environ.items() if k not in PYTHON_VARIABLES}
+    env.update(PANTOHIL_LIBPYTHON=str(SYSTEM_LIBPYTHON), PYTHONHOME="/usr", PYTHONPATH=str(tmp_path / "empty"))
+    proc = subprocess.run([str(host), str(plan)], env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode != 0
+    assert "No module named 'numpy'" in proc.stdout
+    assert "the embedded Python needs numpy and scipy" in proc.stdout
+
+
 WRONG_STEP_IN_FMPY = """
 import os, sys
 from fmpy import extract, read_model_description
