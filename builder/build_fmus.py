@@ -27,7 +27,7 @@ from pantohil.models.catenary.profile import write_profile_csv
 from . import loader
 from .system import FMU_NAMES, loop_latency_steps
 
-BUILDER_VERSION = "11"
+BUILDER_VERSION = "12"
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}
@@ -109,6 +109,33 @@ CAPABILITIES = {"canHandleVariableCommunicationStepSize": "false", "canGetAndSet
                 "canSerializeFMUstate": "true"}
 
 
+def _declare_behaviour(root: ET.Element, experiment: tuple[float, float]) -> None:
+    """Capabilities, DefaultExperiment and ModelStructure as they are. Outputs: computed in doStep from
+    the inputs of the step before (dependencies=""), and computed during initialisation (the pantograph
+    settles on its input height, the catenary commands its first height), hence initial="calculated",
+    listed in InitialUnknowns (depending on everything set before: no dependencies attribute)."""
+    for key, value in CAPABILITIES.items():
+        root.find("CoSimulation").set(key, value)
+    step_s, stop_s = experiment
+    for old in root.findall("DefaultExperiment"):
+        root.remove(old)
+    root.insert(list(root).index(root.find("ModelVariables")), ET.Element(
+        "DefaultExperiment", {"startTime": "0.0", "stopTime": repr(float(stop_s)), "stepSize": repr(float(step_s))}))
+    for sv in root.iter("ScalarVariable"):
+        if sv.get("causality") == "output":
+            sv.set("initial", "calculated")
+            sv[0].attrib.pop("start", None)
+    structure = root.find("ModelStructure")
+    outputs = structure.find("Outputs")
+    for unknown in outputs.iter("Unknown"):
+        unknown.set("dependencies", "")
+    for old in structure.findall("InitialUnknowns"):
+        structure.remove(old)
+    initial = ET.SubElement(structure, "InitialUnknowns")
+    for unknown in outputs.iter("Unknown"):
+        ET.SubElement(initial, "Unknown", {"index": unknown.get("index")})
+
+
 def decorate_model_description(xml_bytes: bytes, variables, experiment: tuple[float, float]) -> bytes:
     """Add unit and display-unit definitions, units, ranges and the generation tool to pythonfmu's
     modelDescription.xml; state the fixed step, the default experiment (step, stop time), the state
@@ -116,16 +143,7 @@ def decorate_model_description(xml_bytes: bytes, variables, experiment: tuple[fl
     input: every output is computed in doStep or read from the state it leaves)."""
     root = ET.fromstring(xml_bytes)
     root.set("generationTool", f"pantohil {_version()} with {root.get('generationTool')}")
-    for key, value in CAPABILITIES.items():
-        root.find("CoSimulation").set(key, value)
-    step_s, stop_s = experiment
-    experiment_el = ET.Element("DefaultExperiment", {"startTime": "0.0", "stopTime": repr(float(stop_s)),
-                                                     "stepSize": repr(float(step_s))})
-    for old in root.findall("DefaultExperiment"):
-        root.remove(old)
-    root.insert(list(root).index(root.find("ModelVariables")), experiment_el)
-    for unknown in root.iterfind("ModelStructure/Outputs/Unknown"):
-        unknown.set("dependencies", "")
+    _declare_behaviour(root, experiment)
     by_name = {v.name: v for v in variables}
     used = sorted({v.unit for v in variables if v.kind == "real"})
     units = ET.Element("UnitDefinitions")

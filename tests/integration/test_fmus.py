@@ -36,3 +36,22 @@ def test_every_real_variable_has_a_unit_and_a_description(built):
             real = sv.find("Real")
             if real is not None:
                 assert real.get("unit") in units, sv.get("name")
+
+
+@pytest.mark.slow
+def test_model_descriptions_state_step_state_and_dependencies(built):
+    for name, path in built.items():
+        with zipfile.ZipFile(path) as z:
+            root = ET.fromstring(z.read("modelDescription.xml"))
+        cs = root.find("CoSimulation")
+        assert cs.get("canHandleVariableCommunicationStepSize") == "false", name
+        assert cs.get("canGetAndSetFMUstate") == "true" and cs.get("canSerializeFMUstate") == "true", name
+        experiment = root.find("DefaultExperiment")
+        assert float(experiment.get("stepSize")) == 0.001 and float(experiment.get("stopTime")) == 0.936, name
+        variables = list(root.iter("ScalarVariable"))
+        outputs = [str(i + 1) for i, sv in enumerate(variables) if sv.get("causality") == "output"]
+        assert [u.get("index") for u in root.iterfind("ModelStructure/Outputs/Unknown")] == outputs
+        assert all(u.get("dependencies") == "" for u in root.iterfind("ModelStructure/Outputs/Unknown"))
+        assert [u.get("index") for u in root.iterfind("ModelStructure/InitialUnknowns/Unknown")] == outputs
+        assert all(variables[int(i) - 1].get("initial") == "calculated" for i in outputs)
+        assert all(sv.get("name") != "model" and sv.get("name").replace("_", "").isalnum() for sv in variables)
