@@ -131,6 +131,7 @@ class RunState:
     status: str = "span_limit"
     message: str = ""
     wall_s: float = 0.0
+    cpu_s: float = 0.0  # CPU time of the process (all threads) while stepping
     per_step_us: dict = field(default_factory=dict)
     realtime: dict | None = None
     link: dict | None = None
@@ -329,7 +330,7 @@ def step_until_done(state: RunState) -> None:
     hardware = state.prepared.options.hardware
     state.bar = tqdm(total=case.values["run"]["max_spans"], initial=state.first_span, unit="span", leave=False,
                      desc=case.name, disable=None if state.prepared.options.progress else True)
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), time.process_time()
     try:
         if hardware is not None and _link_state_now(state.master) == LINK_FAULT:
             raise _Stop("link_lost", f"the rig at {hardware[0]}:{hardware[1]} did not answer the session start")
@@ -343,7 +344,7 @@ def step_until_done(state: RunState) -> None:
     except _Stop as stop:
         state.status, state.message = stop.status, str(stop)
     finally:
-        state.wall_s = time.perf_counter() - t_start
+        state.wall_s, state.cpu_s = time.perf_counter() - t_start, time.process_time() - cpu_start
         end_stepping(state)
 
 

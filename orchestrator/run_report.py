@@ -129,7 +129,8 @@ def summarise_run(state) -> RunSummary:
     status, message, signal_name = _final_status(state)
     wall = state.wall_s
     timing = Timing(wall_s=wall, build_s=prepared.build_s, simulated_s=k * dt,
-                    realtime_factor=k * dt / wall if wall > 0 else math.inf, per_step_us=state.per_step_us)
+                    realtime_factor=k * dt / wall if wall > 0 else math.inf, per_step_us=state.per_step_us,
+                    cpu_s=state.cpu_s)
     summary = RunSummary(
         case=case.name, master=prepared.options.master_kind, status=status, message=message, spans=spans_done,
         samples_per_span=n, dt_s=dt, speed_kmh=case.speed_kmh, catenary=_catenary_summary(case),

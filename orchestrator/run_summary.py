@@ -44,13 +44,15 @@ class ForceStatistics:
 
 @dataclass(frozen=True)
 class Timing:
-    """Wall and simulated time of a run; per_step_us: median set+doStep+get of each FMU [us]."""
+    """Wall and simulated time of a run; per_step_us: median set+doStep+get of each FMU [us]; cpu_s:
+    CPU time of the run's process (all its threads) while it stepped."""
 
     wall_s: float
     build_s: float
     simulated_s: float
     realtime_factor: float
     per_step_us: dict = field(default_factory=dict)
+    cpu_s: float | None = None
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,11 @@
 """Cost of the live view: the default virtual run without --live, with
 --live and one subscribed client that reads everything, and with --live and a client that subscribes
 and then stops reading. Runs are interleaved (A B C A B C ...) on a shared machine; prints the median,
-min and max of the real-time factor, the wall time per step and the run process's peak resident
-memory (VmHWM of /proc/PID/status, read while the run ends). Not a timed test.
+min and max of the real-time factor, the wall time per step, the CPU time per step of the run's
+process while it steps (all its threads: stepping, publishing, the server; summary.json
+timing.cpu_s) and its peak resident memory (VmHWM of /proc/PID/status). The client runs in a
+session of its own (as a viewer program would), so that the kernel's per-session CPU sharing does
+not lend the run its share. Not a timed test.
 
     python tests/benchmarks/bench_live.py [--repeats 5] [--spans 30]
 """
@@ -46,15 +49,15 @@ def client(url: str, stall: bool) -> None:
         print(f"client received {count} messages", file=sys.stderr)
 
 
-def _peak_rss_mb(proc: subprocess.Popen, peak: list) -> None:
+def _follow_process(proc: subprocess.Popen, figures: dict) -> None:
     """Follow VmHWM (peak resident set) of the run until it exits."""
-    path = Path(f"/proc/{proc.pid}/status")
+    status = Path(f"/proc/{proc.pid}/status")
     while proc.poll() is None:
         try:
-            for line in path.read_text().splitlines():
+            for line in status.read_text().splitlines():
                 if line.startswith("VmHWM:"):
-                    peak[0] = max(peak[0], int(line.split()[1]) / 1024)
-        except OSError:
+                    figures["peak_rss_mb"] = max(figures["peak_rss_mb"], int(line.split()[1]) / 1024)
+        except (OSError, ValueError):
             break
         threading.Event().wait(0.05)
 
@@ -65,17 +68,16 @@ def one_run(arm: int, out: Path, spans: int) -> dict:
     if arm:
         cmd += ["--live", "127.0.0.1:0", "--live-wait"]
     run = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    peak = [0.0]
-    watcher = threading.Thread(target=_peak_rss_mb, args=(run, peak), daemon=True)
+    figures = {"peak_rss_mb": 0.0}
+    watcher = threading.Thread(target=_follow_process, args=(run, figures), daemon=True)
     watcher.start()
     viewer = None
     if arm:
         for line in run.stdout:  # wait on the server's line
             if "listening on" in line:
                 url = line.split("listening on ")[1].split()[0]
-                viewer = subprocess.Popen(
-                    [sys.executable, __file__, "--client", url] + (["--stall"] if arm == 2 else [])
-                )
+                stall = ["--stall"] if arm == 2 else []
+                viewer = subprocess.Popen([sys.executable, __file__, "--client", url, *stall], start_new_session=True)
                 break
     _, err = run.communicate()
     watcher.join()
@@ -88,7 +90,7 @@ def one_run(arm: int, out: Path, spans: int) -> dict:
     s = json.loads((out / "summary.json").read_text())
     steps = s["timing"]["simulated_s"] / s["dt_s"]
     return {"rtf": s["timing"]["realtime_factor"], "us_per_step": s["timing"]["wall_s"] / steps * 1e6,
-            "peak_rss_mb": peak[0]}
+            "cpu_us_per_step": s["timing"]["cpu_s"] / steps * 1e6, "peak_rss_mb": figures["peak_rss_mb"]}
 
 
 def _line(name: str, values: list[float], unit: str, fmt: str = ".1f") -> str:
@@ -113,17 +115,15 @@ def main() -> None:
             for arm in results:
                 results[arm].append(one_run(arm, Path(tmp) / f"r{i}-{arm}", args.spans))
     print(f"default case, {args.spans} spans per run, {args.repeats} interleaved repeats per arm")
-    base = {k: statistics.median(r[k] for r in results[0]) for k in ("rtf", "us_per_step")}
+    keys = {"rtf": ("real time", "x"), "us_per_step": ("wall per step", "us"),
+            "cpu_us_per_step": ("CPU per step", "us")}
+    base = {k: statistics.median(r[k] for r in results[0]) for k in keys}
     for arm, name in enumerate(ARMS):
-        rows = results[arm]
-        rtf = [r["rtf"] for r in rows]
-        step = [r["us_per_step"] for r in rows]
         print(f"{name}:")
-        print(_line("real time", rtf, "x") + f"  {100 * (statistics.median(rtf) / base['rtf'] - 1):+.1f} %")
-        print(
-            _line("wall per step", step, "us") + f"  {100 * (statistics.median(step) / base['us_per_step'] - 1):+.1f} %"
-        )
-        print(_line("peak RSS", [r["peak_rss_mb"] for r in rows], "MB"))
+        for key, (label, unit) in keys.items():
+            values = [r[key] for r in results[arm]]
+            print(_line(label, values, unit) + f"  {100 * (statistics.median(values) / base[key] - 1):+.1f} %")
+        print(_line("peak RSS", [r["peak_rss_mb"] for r in results[arm]], "MB"))
 
 
 if __name__ == "__main__":
