@@ -30,7 +30,7 @@ def client(url: str, stall: bool) -> None:
 
     from websockets.sync.client import connect
 
-    with connect(url, subprotocols=["foxglove.sdk.v1"], max_size=None, max_queue=4) as ws:
+    with connect(url, subprotocols=["foxglove.sdk.v1"], max_size=None, max_queue=4, ping_interval=None) as ws:
         channels = []
         while not channels:
             msg = json.loads(ws.recv())
