@@ -581,6 +581,7 @@ def _terminate(signum, frame):
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The `pantohil` command: parse the arguments, run the command, return its exit code."""
     from pantohil.orchestrator.stopping import stop_on_signals
 
     signal.signal(signal.SIGTERM, _terminate)
