@@ -1,4 +1,4 @@
-"""Issue 14 acceptance 2: every case key that reaches an FMU has, in the built FMU's
+"""One declaration per parameter: every case key that reaches an FMU has, in the built FMU's
 modelDescription.xml, the name, unit, range and description of its one declaration
 (models/parameters.py), and the case's value as its start value."""
 from __future__ import annotations

@@ -38,7 +38,7 @@ def test_the_block_begins_on_a_contact_sample_and_holds_the_whole_stitch(stitche
 
 
 def test_the_block_reproduces_the_fe_vertical_stiffness_along_the_span(stitched):
-    """Acceptance 1 of the stitched PFEM: the static single-load stiffness of the infinite periodic
+    """The stitched PFEM block: the static single-load stiffness of the infinite periodic
     block (Bloch synthesis at w -> 0) against the FE builder's central span of 5 (measured 0.04 %)."""
     cat, cb, fim = stitched
     L = cat.span_m
@@ -51,7 +51,7 @@ def test_the_block_reproduces_the_fe_vertical_stiffness_along_the_span(stitched)
 
 
 def test_the_block_radiates_the_fe_wavelengths(stitched):
-    """Acceptance 1: the wavelength a fixed harmonic force radiates along the contact wire of the
+    """The wavelength a fixed harmonic force radiates along the contact wire of the
     infinite periodic block (Floquet-Bloch synthesis over 17 blocks) against the FE builder's 12-span
     section with absorbing ends, at the propagating frequencies of the ASM fit (every 1 Hz from 5 to 40
     Hz here; measured at all 128 of them: max 1.37 %, RMS 0.19 %)."""
