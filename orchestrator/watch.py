@@ -128,9 +128,15 @@ def _final_status(folder: Path, finished: bool) -> str:
     return f"{s['status']}: {s['message']}"
 
 
+def log_path(folder: Path) -> Path:
+    """The folder's newest log: a resumed run writes run_from_span_NNNN.mcap next to run.mcap."""
+    resumed = sorted(folder.glob("run_from_span_*.mcap"))
+    return resumed[-1] if resumed else folder / "run.mcap"
+
+
 def _follow(folder: Path, view: RunView, interval_s: float, on_change) -> bool:
     """Poll the log until it is finished; `on_change(closed_spans)` after each poll with news."""
-    path = folder / "run.mcap"
+    path = log_path(folder)
     while not path.exists():
         on_change([])
         time.sleep(interval_s)
@@ -159,9 +165,9 @@ def watch(folder: Path, interval_s: float = 0.5, once: bool = False, console: Co
         raise CaseError(f"watch: --interval must be > 0 s (got {interval_s:g})")
     view = RunView()
     if once:
-        if not (folder / "run.mcap").exists():
+        if not log_path(folder).exists():
             raise CaseError(f"watch: no run.mcap in {folder} yet")
-        follower = McapFollower(folder / "run.mcap")
+        follower = McapFollower(log_path(folder))
         try:
             view.update(follower.poll())
         except McapFollowError as exc:
