@@ -3,13 +3,15 @@
 It shows the figures of the Foxglove layout: the span-to-span change, mean and std of each closed span,
 the force of the current span over the previous one, and the newest per-step values (actuator height,
 link counters on a rig). It reads only the complete records of the growing file; when the file is
-finished it prints the run's status from summary.json. On a terminal the view redraws in place (rich);
-otherwise it prints one line per closed span.
+finished it waits for the run to release the folder's lock and prints the status from summary.json.
+On a terminal the view redraws in place (rich); otherwise it prints one line per closed span.
 """
 from __future__ import annotations
 
+import fcntl
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -21,11 +23,11 @@ from rich.text import Text
 from pantohil.models.case import CaseError
 
 from .mcap_follow import McapFollower, McapFollowError
+from .run_folder import LOCK_NAME
 
 BARS = "▁▂▃▄▅▆▇█"
 SPARK_WIDTH = 60
 HISTORY_ROWS = 8
-SUMMARY_WAIT_S = 30.0  # after the log is finished: the run writes summary.json next
 
 
 class RunView:
@@ -117,11 +119,23 @@ def render(view: RunView, folder: Path, status: str) -> Group:
     return Group(head, _history_table(view), _span_force_text(view), _latest_table(view))
 
 
+def wait_for_run_end(folder: Path) -> None:
+    """Block until the run holding the folder's lock lets go of it (it writes summary.json first)."""
+    try:
+        fd = os.open(folder / LOCK_NAME, os.O_RDONLY)
+    except FileNotFoundError:  # no run holds the folder
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH)
+        fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
 def _final_status(folder: Path, finished: bool) -> str:
     summary = folder / "summary.json"
-    deadline = time.monotonic() + SUMMARY_WAIT_S
-    while finished and not summary.exists() and time.monotonic() < deadline:
-        time.sleep(0.2)
+    if finished:
+        wait_for_run_end(folder)
     if not summary.exists():
         return "log finished, no summary.json" if finished else "running"
     s = json.loads(summary.read_text())
