@@ -6,21 +6,14 @@ import json
 from pathlib import Path
 
 import numpy as np
-from scipy import signal
-
 from pantohil.models.case import Case, CaseError
 from pantohil.models.catenary.fe.definition import load_definition
+from pantohil.models.metrics import LOWPASS_CUTOFF_HZ, lowpass, lowpass_periodic
 
 from . import report
 from .recorder import McapRecorder
 
-CUTOFF_HZ = 20.0
-
-
-def lowpass(x: np.ndarray, dt: float, cutoff_hz: float = CUTOFF_HZ) -> np.ndarray:
-    """Zero-phase low-pass (4th-order Butterworth run forwards and backwards)."""
-    b, a = signal.butter(4, cutoff_hz * 2 * dt)
-    return signal.filtfilt(b, a, x)
+CUTOFF_HZ = LOWPASS_CUTOFF_HZ
 
 
 def central_spans(n_spans: int, central: int) -> list[int]:
@@ -134,8 +127,6 @@ def span_force(run: Path) -> tuple[np.ndarray, float, str]:
         filt = np.stack([d[d[:, 0] == j, 3] for j in spans])
         return filt.mean(axis=0), dt, f"fem-sim {s['n_spans']} spans (mean of spans {spans})"
     if (run / "steady_span.csv").exists():
-        from pantohil.models.metrics import lowpass_periodic
-
         d = np.loadtxt(run / "steady_span.csv", delimiter=",", skiprows=1, ndmin=2)
         dt = float(s["dt_s"])
         return lowpass_periodic(d[:, -1], dt, CUTOFF_HZ), dt, f"HIL {s['catenary']['model']} ({s['case']})"

@@ -22,8 +22,7 @@ def test_a_long_fe_string_reproduces_the_asm_closed_form():
         integrate_section,
     )
     from pantohil.models.catenary.receptance import harmonic_count
-    from pantohil.models.metrics import lowpass_periodic
-    from pantohil.orchestrator.fem_sim import lowpass
+    from pantohil.models.metrics import lowpass, lowpass_periodic
 
     case = load_case()
     n, dt = case.samples_per_span, case.dt_s
