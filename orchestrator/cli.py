@@ -466,7 +466,11 @@ def _cmd_package(args) -> int:
     from pantohil.orchestrator.package import make_package
 
     case = load_case(args.case, args.overrides)
-    out = make_package(case, args.out, args.overrides, progress=not args.quiet)
+    try:
+        out = make_package(case, args.out, args.overrides, progress=not args.quiet)
+    except KeyboardInterrupt:
+        print("interrupted: no package written", file=sys.stderr)
+        return 130
     if args.zip:
         archive = shutil.make_archive(str(out), "zip", root_dir=out.parent, base_dir=out.name)
         print(f"archive: {archive}")

@@ -49,6 +49,8 @@ def make_package(case: Case, out_dir: Path, overrides: list[str], progress: bool
     stage = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))  # same filesystem: atomic rename
     try:
         ref = run_case(case, stage / "_run", progress=progress)
+        if ref.status == "interrupted":  # the staging folder goes, nothing is written
+            raise KeyboardInterrupt
         if not ref.converged:
             raise CaseError(f"case {case.name}: the reference run did not converge ({ref.message})")
         (stage / "reference").mkdir()
