@@ -532,11 +532,14 @@ def _cmd_compare(args) -> int:
 
 
 def _cmd_stability(args) -> int:
-    from pantohil.orchestrator.stability_run import run_stability
+    from pantohil.orchestrator.stability_run import parse_range, run_stability
 
+    f_max = parse_range(args.fmax, "--fmax")
+    stiffness = parse_range(args.contact_stiffness, "--contact-stiffness")
+    delays = parse_range(args.delay, "--delay", integer=True)
     try:
-        s = run_stability(args.case, args.overrides, args.out, args.update, args.fmax, args.contact_stiffness,
-                          args.delay, args.relaxation, args.scheduler, args.workers, progress=not args.quiet)
+        s = run_stability(args.case, args.overrides, args.out, args.update, f_max, stiffness, delays,
+                          args.relaxation, args.scheduler, args.workers, progress=not args.quiet)
     except KeyboardInterrupt:
         print("interrupted: no map written", file=sys.stderr)
         return 130

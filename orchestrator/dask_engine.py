@@ -19,12 +19,12 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
     from distributed import Client, LocalCluster
 
     if workers is not None and workers < 1:
-        raise CaseError(f"--workers: must be >= 1 (got {workers})")
+        raise CaseError(f"workers: must be >= 1 (got {workers})")
     if scheduler:
         try:
             client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError, ValueError) as exc:
-            raise CaseError(f"--scheduler: cannot reach the Dask scheduler at {scheduler} "
+            raise CaseError(f"Dask scheduler: cannot reach the Dask scheduler at {scheduler} "
                             f"within {CONNECT_TIMEOUT_S} s ({type(exc).__name__})") from None
         try:
             yield client

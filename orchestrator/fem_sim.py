@@ -18,11 +18,11 @@ CUTOFF_HZ = LOWPASS_CUTOFF_HZ
 
 def central_spans(n_spans: int, central: int) -> list[int]:
     if n_spans < 1:
-        raise CaseError(f"--spans: must be at least 1 (got {n_spans})")
+        raise CaseError(f"spans: must be at least 1 (got {n_spans})")
     if central < 1:
-        raise CaseError(f"--central: must be at least 1 (got {central})")
+        raise CaseError(f"central spans: must be at least 1 (got {central})")
     if n_spans < central + 4:
-        raise CaseError(f"--spans: {n_spans} spans leave no central region of {central} spans with 2 spans on "
+        raise CaseError(f"spans: {n_spans} spans leave no central region of {central} spans with 2 spans on "
                         f"each side (need at least {central + 4})")
     first = (n_spans - central) // 2
     return list(range(first, first + central))

@@ -44,7 +44,7 @@ def make_package(case: Case, out_dir: Path, overrides: list[str], progress: bool
         raise CaseError("profile.source: a package cannot yet carry a CSV profile; use a dropper profile")
     out_dir = Path(out_dir)
     if out_dir.exists() and any(out_dir.iterdir()):
-        raise CaseError(f"--out: {out_dir} exists and is not empty")
+        raise CaseError(f"package folder {out_dir} exists and is not empty")
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))  # same filesystem: atomic rename
     try:

@@ -41,11 +41,11 @@ class Faults:
         for name in ("loss", "reorder", "duplicate", "corrupt"):
             p = getattr(self, name)
             if not 0.0 <= p <= 1.0:
-                raise ValueError(f"--{name}: a probability in [0, 1] (got {p})")
+                raise ValueError(f"{name}: a probability in [0, 1] (got {p})")
         if self.loss + self.reorder + self.duplicate + self.corrupt > 1.0:
-            raise ValueError("--loss, --reorder, --duplicate and --corrupt add up to more than 1")
+            raise ValueError("the loss, reorder, duplicate and corrupt probabilities add up to more than 1")
         if self.delay_us < 0:
-            raise ValueError(f"--delay-us: must be >= 0 (got {self.delay_us})")
+            raise ValueError(f"answer delay: must be >= 0 (got {self.delay_us})")
 
 
 @dataclass

@@ -77,7 +77,7 @@ def _operator(case: Case, f_max: float):
     from pantohil.models.catenary.pfem.operator_file import load_operators
 
     if nh > case.n_harmonics:
-        raise CaseError(f"--fmax: {f_max:g} Hz needs {nh} harmonics; this PFEM case's operators keep "
+        raise CaseError(f"f_max: {f_max:g} Hz needs {nh} harmonics; this PFEM case's operators keep "
                         f"{case.n_harmonics} (raise hil.max_frequency_hz)")
     ops = load_operators(case_operators(case, progress=False).path)
     I_cc = np.asarray(ops.cc, dtype=float).T  # ops.cc[m] is column m: the heights per unit force at sample m
@@ -106,32 +106,32 @@ def stability_row(task: dict) -> list[dict]:
 
 
 def run_stability(case_path: Path | None, overrides: list[str], out: Path, update: str | None = None,
-                  fmax: str | None = None, kc: str | None = None, delay: str | None = None,
-                  relaxation: float | None = None, scheduler: str | None = None, workers: int | None = None,
-                  progress: bool = True) -> dict:
+                  f_max_hz: np.ndarray | None = None, contact_stiffness_N_m: np.ndarray | None = None,
+                  delay_steps: np.ndarray | None = None, relaxation: float | None = None,
+                  scheduler: str | None = None, workers: int | None = None, progress: bool = True) -> dict:
+    """The spectral-radius map over f_max, contact stiffness and delay (Paper D sec. 4); an axis not
+    given takes the case's value (the delay: the case's latency and advance)."""
     case = load_case(case_path, overrides)
     update = update or case.hil_update
     if update not in ("step", "span"):
-        raise CaseError(f"--update: must be step or span (got {update!r})")
+        raise CaseError(f"update: must be step or span (got {update!r})")
     if relaxation is not None and not 0 < relaxation < 2:
-        raise CaseError(f"--relaxation: must lie in (0, 2) (got {relaxation:g})")
-    f_values = parse_range(fmax, "--fmax")
-    if f_values is None:
-        f_values = np.array([case.values["hil"]["max_frequency_hz"]])
-    k_values = parse_range(kc, "--contact-stiffness")
-    if k_values is None:
-        k_values = np.array([case.pantograph.contact_stiffness_N_m])
+        raise CaseError(f"relaxation: must lie in (0, 2) (got {relaxation:g})")
+    f_values = np.array([case.values["hil"]["max_frequency_hz"]] if f_max_hz is None else f_max_hz, dtype=float)
+    k_values = np.array([case.pantograph.contact_stiffness_N_m] if contact_stiffness_N_m is None
+                        else contact_stiffness_N_m, dtype=float)
     if np.any(f_values <= 0):
-        raise CaseError(f"--fmax: frequencies must be > 0 Hz (got {fmax})")
+        raise CaseError(f"f_max: frequencies must be > 0 Hz (got {f_values.min():g} Hz)")
     if np.any(k_values <= 0):
-        raise CaseError(f"--contact-stiffness: must be > 0 N/m (got {kc})")
+        raise CaseError(f"contact stiffness: must be > 0 N/m (got {k_values.min():g} N/m)")
     plan = delay_plan(case)
-    d_values = parse_range(delay, "--delay", integer=True)
-    if d_values is None:
+    if delay_steps is None:
         pairs = [(plan["delay_steps"], plan["loop_latency_steps"] + plan["rig_latency_steps"])]
     else:
+        d_values = np.asarray(delay_steps)
         if np.any(d_values < 1) or np.any(d_values >= case.samples_per_span):
-            raise CaseError(f"--delay: must lie in 1..{case.samples_per_span - 1} steps (got {delay})")
+            raise CaseError(f"delay: must lie in 1..{case.samples_per_span - 1} steps (got {d_values.min()} to "
+                            f"{d_values.max()})")
         pairs = [(int(d), int(d)) for d in d_values]
     points = len(pairs) * len(f_values) * len(k_values)
     if points > MAX_MAP_POINTS:

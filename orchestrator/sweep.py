@@ -234,7 +234,7 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
     if marker.exists():
         previous = json.loads(marker.read_text())
         if previous.get("hash") != definition["hash"]:
-            raise CaseError(f"--out {out}: holds the results of another sweep ({previous.get('name')}); "
+            raise CaseError(f"sweep folder {out} holds the results of another sweep ({previous.get('name')}); "
                             "use a new folder")
     grid_keys = list(definition["grid"])
     columns = ["point"] + grid_keys + list(STATS)

@@ -260,6 +260,7 @@ CASES = [
     _stab("stability-letters", ("--fmax", "a:b:3"), ("--fmax", "expected")),
     _stab("stability-nan", ("--fmax", "nan"), ("--fmax", "finite")),
     _stab("stability-inf-stiffness", ("--contact-stiffness", "inf"), ("--contact-stiffness", "finite")),
+    _stab("stability-negative-delay", ("--delay", "-3"), ("delay", "must lie in 1..")),
     _stab(
         "stability-map-too-large",
         ("--fmax", "1:20:10000", "--contact-stiffness", "1e4:1e5:10000"),
