@@ -95,7 +95,8 @@ class PantohilCatenary(PantohilSlave):
         """Build the operator (ASM2 from its parameters, or the PFEM operators in the resources) and the iteration."""
         n = int(self.samples_per_span)
         self.harmonics = harmonic_count(self.max_frequency_hz, n, self.time_step)
-        settings = HilSettings(UPDATES[self.hil_update], self.relaxation, self.delay_steps, self.ramp_steps)
+        settings = HilSettings(update=UPDATES[self.hil_update], relaxation=self.relaxation,
+                               delay_steps=self.delay_steps, ramp_steps=self.ramp_steps)
         if self.catenary_model == 1:
             ops = load_operators(Path(self.resources) / OPERATOR_FILE)
             s = ops.settings

@@ -40,13 +40,13 @@ class PantohilPantograph(PantohilSlave):
         def pick(stem):
             return tuple(float(getattr(self, f"{stem}_{i}")) for i in range(1, n + 1))
         params = PantographParameters(
-            pick("masses_kg"),
-            pick("stiffnesses_N_m"),
-            pick("dampings_Ns_m"),
-            self.contact_stiffness_N_m,
-            self.uplift_force_N,
-            "rigid_mass" if self.pantograph_model == 1 else "chain",
-            self.gravity_m_s2,
+            masses_kg=pick("masses_kg"),
+            stiffnesses_N_m=pick("stiffnesses_N_m"),
+            dampings_Ns_m=pick("dampings_Ns_m"),
+            contact_stiffness_N_m=self.contact_stiffness_N_m,
+            uplift_force_N=self.uplift_force_N,
+            model="rigid_mass" if self.pantograph_model == 1 else "chain",
+            gravity_m_s2=self.gravity_m_s2,
         )
         self._model = make_pantograph(params, self.time_step, self.reference_height)
         self.contact_force = self._model.settle(self.height)

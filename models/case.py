@@ -208,7 +208,8 @@ class Case:
 
     def hil_settings(self, delay_steps: int) -> HilSettings:
         """The case's HIL settings with delay advance D = delay_steps (Paper D sec. 3)."""
-        return HilSettings(self.hil_update, self.relaxation, delay_steps, self.ramp_steps)
+        return HilSettings(update=self.hil_update, relaxation=self.relaxation, delay_steps=delay_steps,
+                           ramp_steps=self.ramp_steps)
 
     def sample_positions_m(self) -> np.ndarray:
         """Position x of the contact point at each of the N samples of a span [m]."""
@@ -256,9 +257,11 @@ def _check_pantograph(v: dict) -> PantographParameters:
             raise CaseError(f"pantograph.{key}: every value must be {bound} (got {p[key]})")
     uplift = mean_force_en50367(v["run"]["speed_kmh"]) if p["uplift_force_N"] == AUTO else p["uplift_force_N"]
     n = len(p["masses_kg"])
-    return PantographParameters(tuple(p["masses_kg"]), tuple(p["stiffnesses_N_m"][:n] or [0.0]),
-                                tuple(p["dampings_Ns_m"][:n] or [0.0]), p["contact_stiffness_N_m"],
-                                uplift, p["model"], p["gravity_m_s2"])
+    return PantographParameters(masses_kg=tuple(p["masses_kg"]),
+                                stiffnesses_N_m=tuple(p["stiffnesses_N_m"][:n] or [0.0]),
+                                dampings_Ns_m=tuple(p["dampings_Ns_m"][:n] or [0.0]),
+                                contact_stiffness_N_m=p["contact_stiffness_N_m"], uplift_force_N=uplift,
+                                model=p["model"], gravity_m_s2=p["gravity_m_s2"])
 
 
 def _analysis(case_path: Path, name: str, key: str):
