@@ -55,6 +55,9 @@ class _Viewers:
     def on_subscribe(self, client, channel) -> None:
         self.subscribed.set()
 
+    def on_unsubscribe(self, client, channel) -> None:
+        """A viewer that leaves changes nothing in the run (the server calls this for each channel)."""
+
 
 class LivePublisher:
     """Publishes a run's groups while it steps. `completed()` is the number of steps whose records are

@@ -1,7 +1,8 @@
 """Cost of the live view: the default virtual run without --live, with
 --live and one subscribed client that reads everything, and with --live and a client that subscribes
 and then stops reading. Runs are interleaved (A B C A B C ...) on a shared machine; prints the median,
-min and max of the real-time factor, the wall time per step, the CPU time per step of the run's
+min and max of the real-time factor, the wall time per step, the sum of the FMUs' median set+doStep+get
+times (measured inside the stepping loop), the CPU time per step of the run's
 process while it steps (all its threads: stepping, publishing, the server; summary.json
 timing.cpu_s) and its peak resident memory (VmHWM of /proc/PID/status). The client runs in a
 session of its own (as a viewer program would), so that the kernel's per-session CPU sharing does
@@ -90,7 +91,8 @@ def one_run(arm: int, out: Path, spans: int) -> dict:
     s = json.loads((out / "summary.json").read_text())
     steps = s["timing"]["simulated_s"] / s["dt_s"]
     return {"rtf": s["timing"]["realtime_factor"], "us_per_step": s["timing"]["wall_s"] / steps * 1e6,
-            "cpu_us_per_step": s["timing"]["cpu_s"] / steps * 1e6, "peak_rss_mb": figures["peak_rss_mb"]}
+            "cpu_us_per_step": s["timing"]["cpu_s"] / steps * 1e6,
+            "fmu_us_per_step": sum(s["timing"]["per_step_us"].values()), "peak_rss_mb": figures["peak_rss_mb"]}
 
 
 def _line(name: str, values: list[float], unit: str, fmt: str = ".1f") -> str:
@@ -116,7 +118,7 @@ def main() -> None:
                 results[arm].append(one_run(arm, Path(tmp) / f"r{i}-{arm}", args.spans))
     print(f"default case, {args.spans} spans per run, {args.repeats} interleaved repeats per arm")
     keys = {"rtf": ("real time", "x"), "us_per_step": ("wall per step", "us"),
-            "cpu_us_per_step": ("CPU per step", "us")}
+            "cpu_us_per_step": ("CPU per step", "us"), "fmu_us_per_step": ("FMU calls/step", "us")}
     base = {k: statistics.median(r[k] for r in results[0]) for k in keys}
     for arm, name in enumerate(ARMS):
         print(f"{name}:")
