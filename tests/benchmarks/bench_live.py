@@ -63,7 +63,7 @@ def _follow_process(proc: subprocess.Popen, figures: dict) -> None:
         threading.Event().wait(0.05)
 
 
-def one_run(arm: int, out: Path, spans: int) -> dict:
+def one_run(arm: int, out: Path, spans: int) -> dict | None:
     cmd = [sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--out", str(out), "--quiet",
            "--set", f"run.max_spans={spans}", "--set", "run.convergence_tol=1e-12"]
     if arm:
@@ -86,8 +86,10 @@ def one_run(arm: int, out: Path, spans: int) -> dict:
         if arm == 2:
             viewer.kill()
         viewer.wait()
-    if run.returncode not in (0, 1):
-        raise SystemExit(f"run failed ({run.returncode}): {err.strip().splitlines()[-1] if err.strip() else ''}")
+    if run.returncode not in (0, 1):  # counted and left out of the figures
+        print(f"{ARMS[arm]}: run failed ({run.returncode}): {err.strip().splitlines()[-1] if err.strip() else ''}",
+              file=sys.stderr)
+        return None
     s = json.loads((out / "summary.json").read_text())
     steps = s["timing"]["simulated_s"] / s["dt_s"]
     return {"rtf": s["timing"]["realtime_factor"], "us_per_step": s["timing"]["wall_s"] / steps * 1e6,
@@ -115,13 +117,15 @@ def main() -> None:
         one_run(0, Path(tmp) / "warmup", 2)  # builds (and caches) the FMUs
         for i in range(args.repeats):
             for arm in results:
-                results[arm].append(one_run(arm, Path(tmp) / f"r{i}-{arm}", args.spans))
+                row = one_run(arm, Path(tmp) / f"r{i}-{arm}", args.spans)
+                if row is not None:
+                    results[arm].append(row)
     print(f"default case, {args.spans} spans per run, {args.repeats} interleaved repeats per arm")
     keys = {"rtf": ("real time", "x"), "us_per_step": ("wall per step", "us"),
             "cpu_us_per_step": ("CPU per step", "us"), "fmu_us_per_step": ("FMU calls/step", "us")}
     base = {k: statistics.median(r[k] for r in results[0]) for k in keys}
     for arm, name in enumerate(ARMS):
-        print(f"{name}:")
+        print(f"{name} ({len(results[arm])} runs):")
         for key, (label, unit) in keys.items():
             values = [r[key] for r in results[arm]]
             print(_line(label, values, unit) + f"  {100 * (statistics.median(values) / base[key] - 1):+.1f} %")
