@@ -11,7 +11,6 @@ import html
 import importlib
 import io
 import json
-import os
 import shutil
 import tempfile
 import xml.etree.ElementTree as ET
@@ -23,8 +22,10 @@ import pythonfmu
 from pantohil.fmus import fmu_support
 from pantohil.models.case import Case
 from pantohil.models.catenary.profile import write_profile_csv
+from pantohil.models.storage import atomic_path, cache_root
 
 from . import loader
+from .operators import case_operators
 from .system import FMU_NAMES, loop_latency_steps
 
 BUILDER_VERSION = "12"
@@ -34,10 +35,6 @@ SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adap
 CLASS_NAMES = {"catenary": "PantohilCatenary", "rig": "PantohilRig", "pantograph": "PantohilPantograph",
                "adapter": "PantohilAdapter"}
 SUPPORT_MODULES = ("__init__.py", "fmu_support.py", "udp_protocol.py")
-
-
-def cache_root() -> Path:
-    return Path(os.environ.get("PANTOHIL_CACHE", Path.home() / ".cache" / "pantohil"))
 
 
 def fmu_parameters(case: Case, delay_steps: int,
@@ -78,8 +75,6 @@ def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
         write_profile_csv(stage / "profile.csv", case.profile)
         files.append(stage / "profile.csv")
         if case.model == "pfem":
-            from .operators import case_operators  # here, not at the top: operators uses this module's cache_root
-
             op = case_operators(case)
             shutil.copy2(op.path, stage / "operators.npz")
             files.append(stage / "operators.npz")
@@ -261,9 +256,8 @@ def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path
             _rewrite_zip(fmu, {"modelDescription.xml": decorate_model_description(xml, variables, experiment),
                                **_add_loader(fmu, xml, runtime, Path(tmp))})
             cached.parent.mkdir(parents=True, exist_ok=True)
-            part = cached.with_suffix(".fmu.part")
-            shutil.copy2(fmu, part)
-            os.replace(part, cached)  # atomic: no half-written cache entry
+            with atomic_path(cached) as part:  # no half-written cache entry
+                shutil.copy2(fmu, part)
     dest_dir.mkdir(parents=True, exist_ok=True)
     target = dest_dir / f"{name}.fmu"
     shutil.copy2(cached, target)

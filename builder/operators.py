@@ -25,8 +25,8 @@ from pantohil.models.catenary.fe.definition import load_definition
 from pantohil.models.catenary.pfem.operator_file import FORMAT_VERSION, load_operators, save_operators
 from pantohil.models.catenary.pfem.blocks import periodic_block
 from pantohil.models.catenary.pfem.operators import build_operators
+from pantohil.models.storage import cache_root
 
-from .build_fmus import cache_root
 
 SOURCES = (pfem_frf, pfem_blocks, pfem_operators, fe_model, catenary_definition, operator_file)
 

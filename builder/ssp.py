@@ -2,7 +2,6 @@
 .ssv + the case file) and an OspSystemStructure.xml for libcosim, both of the standard topology."""
 from __future__ import annotations
 
-import os
 import shutil
 import tempfile
 import xml.etree.ElementTree as ET
@@ -12,6 +11,7 @@ from pathlib import Path
 from fmpy import read_model_description
 
 from pantohil.fmus.fmu_support import UNITS
+from pantohil.models.storage import atomic_path
 
 from .system import CONNECTIONS
 
@@ -154,14 +154,12 @@ def write_ssp(path: Path, name: str, fmus: dict[str, Path], parameters: dict[str
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     ssd, ssv = system_structure(name, fmus, parameters, stop_time_s, description, dt)
-    part = path.with_suffix(".ssp.part")
-    with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as z:
+    with atomic_path(path) as part, zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("SystemStructure.ssd", ssd)
         z.writestr(PARAMETERS_RESOURCE, ssv)
         z.writestr(CASE_RESOURCE, case_text)
         for comp, fmu in fmus.items():
             z.write(fmu, f"resources/{comp}.fmu")
-    os.replace(part, path)
     osp_dir = path.parent / f"{path.stem}_osp"
     osp_dir.mkdir(exist_ok=True)
     for comp, fmu in fmus.items():

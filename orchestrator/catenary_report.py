@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import time
 from pathlib import Path
 
@@ -17,17 +16,16 @@ import numpy as np  # noqa: E402
 from pantohil.models.catenary.fe.analysis import CatenaryAnalysis, analyse  # noqa: E402
 from pantohil.models.catenary.fe.definition import load_definition  # noqa: E402
 from pantohil.models.catenary.fe.model import form_find  # noqa: E402
+from pantohil.models.storage import atomic_path, write_text_atomic
 
 from .report import save_figure  # noqa: E402
 
 
 def _write_csv(path: Path, header: list[str], rows) -> None:
-    tmp = path.with_suffix(".csv.part")
-    with tmp.open("w", newline="") as fh:
+    with atomic_path(path) as part, part.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(header)
         w.writerows(rows)
-    os.replace(tmp, path)
 
 
 def _geometry_plot(path: Path, cat, ff) -> None:
@@ -109,7 +107,5 @@ def catenary_report(path: Path, out_dir: Path) -> dict:
                 enumerate(zip(a.dropper_positions_m, a.dropper_lengths_m, a.dropper_tensions_N, strict=False))))
     _geometry_plot(out_dir / "geometry.png", cat, form_find(cat, 3))
     _stiffness_plot(out_dir / "stiffness.png", a)
-    tmp = out_dir / "catenary.json.part"
-    tmp.write_text(json.dumps(summary, indent=2) + "\n")
-    os.replace(tmp, out_dir / "catenary.json")
+    write_text_atomic(out_dir / "catenary.json", json.dumps(summary, indent=2) + "\n")
     return summary

@@ -2,7 +2,6 @@
 run folder; `pantohil compare`: two runs overlaid."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +11,7 @@ from pantohil.models.metrics import LOWPASS_CUTOFF_HZ, lowpass, lowpass_periodic
 
 from . import report
 from .recorder import McapRecorder
+from .run_folder import CENTRAL_SPANS, STEADY_SPAN, read_summary, read_table
 
 CUTOFF_HZ = LOWPASS_CUTOFF_HZ
 
@@ -117,17 +117,15 @@ def span_force(run: Path) -> tuple[np.ndarray, float, str]:
     """One span of contact force of a run folder, 20 Hz low-passed: the converged span of a HIL run or
     the mean of the central spans of a fem-sim run."""
     run = Path(run)
-    s = json.loads((run / "summary.json").read_text()) if (run / "summary.json").exists() else None
-    if s is None:
-        raise CaseError(f"{run}: not a run folder (no summary.json)")
-    if (run / "central_spans.csv").exists():
-        d = np.loadtxt(run / "central_spans.csv", delimiter=",", skiprows=1, ndmin=2)
+    s = read_summary(run)
+    if (run / CENTRAL_SPANS).exists():
+        d = read_table(run, CENTRAL_SPANS)
         dt = float(s["dt_s"])
         spans = [int(j) for j in np.unique(d[:, 0])]
         filt = np.stack([d[d[:, 0] == j, 3] for j in spans])
         return filt.mean(axis=0), dt, f"fem-sim {s['n_spans']} spans (mean of spans {spans})"
-    if (run / "steady_span.csv").exists():
-        d = np.loadtxt(run / "steady_span.csv", delimiter=",", skiprows=1, ndmin=2)
+    if (run / STEADY_SPAN).exists():
+        d = read_table(run, STEADY_SPAN)
         dt = float(s["dt_s"])
         return lowpass_periodic(d[:, -1], dt, CUTOFF_HZ), dt, f"HIL {s['catenary']['model']} ({s['case']})"
     raise CaseError(f"{run}: neither steady_span.csv nor central_spans.csv")

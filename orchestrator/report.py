@@ -4,7 +4,6 @@ from __future__ import annotations
 import functools
 import json
 import math
-import os
 from pathlib import Path
 
 import matplotlib
@@ -12,6 +11,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from pantohil.models.storage import atomic_path, write_text_atomic
 
 
 def _clean(obj):
@@ -32,23 +33,18 @@ def _clean(obj):
 def save_figure(fig, path: Path) -> None:
     """Lay out, write atomically (PNG, 120 dpi) and free a figure."""
     fig.tight_layout()
-    tmp = path.with_name(path.name + ".part")
-    fig.savefig(tmp, dpi=120, format="png")
+    with atomic_path(path) as part:
+        fig.savefig(part, dpi=120, format="png")
     plt.close(fig)
-    os.replace(tmp, path)
 
 
 def write_json_atomic(path: Path, data: dict) -> None:
-    tmp = path.with_suffix(path.suffix + ".part")
-    tmp.write_text(json.dumps(_clean(data), indent=2) + "\n")
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(_clean(data), indent=2) + "\n")
 
 
 def write_steady_span(path: Path, t: np.ndarray, z0: np.ndarray, z: np.ndarray, f: np.ndarray) -> None:
     rows = "\n".join(f"{a:.6f},{b:.12e},{c:.12e},{d:.12e}" for a, b, c, d in zip(t, z0, z, f, strict=False))
-    tmp = path.with_suffix(".csv.part")
-    tmp.write_text("t_s,z0_m,z_m,f_N\n" + rows + "\n")
-    os.replace(tmp, path)
+    write_text_atomic(path, "t_s,z0_m,z_m,f_N\n" + rows + "\n")
 
 
 def plot_contact_force(path: Path, dt: float, spans: list[np.ndarray], reference: np.ndarray | None,
@@ -240,10 +236,9 @@ def plot_stability_maps(out: Path, rows: list[dict], pantograph, update: str, ca
         fig.suptitle(f"{case_name}: {what} updating, {extra} (Paper D Figs. 5-7)")
         fig.tight_layout()
         name = f"stability_{update}_{tag}.png"
-        tmp = out / (name + ".part.png")
-        fig.savefig(tmp, dpi=110)
+        with atomic_path(out / name) as part:
+            fig.savefig(part, dpi=110)
         plt.close(fig)
-        os.replace(tmp, out / name)
         figures.append(name)
     return figures
 
@@ -263,7 +258,6 @@ def plot_sweep_std(path: Path, curves: list, x_label: str, y_label: str, title: 
     if any(label for label, *_ in curves):
         ax.legend(fontsize=8)
     fig.tight_layout()
-    tmp = path.with_suffix(".part.png")
-    fig.savefig(tmp, dpi=110)
+    with atomic_path(path) as part:
+        fig.savefig(part, dpi=110)
     plt.close(fig)
-    os.replace(tmp, path)

@@ -8,10 +8,10 @@ file when a session ends and when it stops.
 """
 from __future__ import annotations
 
+import contextlib
 import gc
 import json
 import math
-import os
 import random
 import signal
 import socket
@@ -23,7 +23,7 @@ from pantohil.fmus import udp_protocol as proto
 from pantohil.models.case import Case
 from pantohil.models.pantograph.lumped import make_pantograph
 from pantohil.models.rig.chain import Rig
-import contextlib
+from pantohil.models.storage import write_text_atomic
 
 RCVBUF_BYTES = 4 << 20
 
@@ -176,10 +176,8 @@ class RigEmulator:
     def write_stats(self) -> None:
         if self.stats_path is None:
             return
-        tmp = self.stats_path.with_suffix(".part")
-        tmp.write_text(json.dumps({**asdict(self.stats), "faults": asdict(self.faults),
-                                   "listen": f"{self.address[0]}:{self.address[1]}"}, indent=1) + "\n")
-        os.replace(tmp, self.stats_path)
+        stats = {**asdict(self.stats), "faults": asdict(self.faults), "listen": f"{self.address[0]}:{self.address[1]}"}
+        write_text_atomic(self.stats_path, json.dumps(stats, indent=1) + "\n")
 
     def serve(self, max_seconds: float | None = None) -> None:
         """Answer datagrams until SIGTERM/SIGINT (or max_seconds); always writes the stats."""

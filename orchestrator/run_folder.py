@@ -1,8 +1,10 @@
 """Run folders: a run writes only into a new or empty folder (or replaces one whole when asked), holds a
-lock on it while it runs, and default folder names stay under runs/."""
+lock on it while it runs, and default folder names stay under runs/; reading a finished one's summary
+and span files."""
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import re
 import shutil
@@ -11,9 +13,14 @@ from contextlib import contextmanager, suppress
 from datetime import datetime
 from pathlib import Path
 
+import numpy as np
+
 from pantohil.models.case import CaseError
 
 LOCK_NAME = ".pantohil-run.lock"
+SUMMARY = "summary.json"
+STEADY_SPAN = "steady_span.csv"  # t_s, z0_m, z_m, f_N of the converged span (HIL runs)
+CENTRAL_SPANS = "central_spans.csv"  # span, t_s, f_N, f_lowpass_N of a fem-sim section
 RUNS_ROOT = Path("runs")
 
 
@@ -101,3 +108,19 @@ def _release(folder: Path, fd: int) -> None:
     with suppress(OSError):
         os.unlink(folder / LOCK_NAME)
     os.close(fd)
+
+
+def read_summary(folder: Path) -> dict:
+    """The summary of a run folder; CaseError with one line if it has none or it is not JSON."""
+    path = Path(folder) / SUMMARY
+    if not path.exists():
+        raise CaseError(f"{folder}: not a run folder (no {SUMMARY})")
+    try:
+        return json.loads(path.read_text())
+    except ValueError as exc:
+        raise CaseError(f"{path}: not readable JSON ({exc})") from None
+
+
+def read_table(folder: Path, name: str) -> np.ndarray:
+    """A CSV file of a run folder (one header line) as a 2-D array."""
+    return np.loadtxt(Path(folder) / name, delimiter=",", skiprows=1, ndmin=2)

@@ -19,6 +19,7 @@ from pantohil.models.case import Case, CaseError, load_case
 from pantohil.models.catenary.receptance import asm_operator, harmonic_count, reduce_harmonics
 from pantohil.models.stability.map_point import (best_relaxation, contact_frequency_hz, problem_for,
                                            with_contact_stiffness)
+from pantohil.models.storage import atomic_path
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
 from .hil_run import delay_plan
@@ -182,15 +183,13 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:
-    tmp = path.with_suffix(".csv.part")
-    with open(tmp, "w", newline="") as fh:
+    with atomic_path(path) as part, open(part, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(COLUMNS)
         for r in rows:
             w.writerow([r["update"], f"{r['f_max_hz']:.6g}", f"{r['contact_stiffness_N_m']:.6g}", r["delay_steps"],
                         f"{r['relaxation']:.6g}",
                         f"{r['spectral_radius']:.9g}" if math.isfinite(r["spectral_radius"]) else "inf"])
-    os.replace(tmp, path)
 
 
 def read_csv(path: Path) -> list[dict]:

@@ -36,9 +36,11 @@ import numpy as np
 
 from pantohil.models.case import SCHEMA, CaseError, load_case
 from pantohil.models.input_files import InputFileError, load_toml
+from pantohil.models.storage import atomic_path
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
 from .report import write_json_atomic
+from .run_folder import SUMMARY, read_summary
 
 KINDS = ("run", "direct")
 DIRECT_KEYS = ("direct.second_pantograph_m",)
@@ -186,11 +188,10 @@ def sweep_point(task: dict) -> dict:
             cmd += ["--set", o]
         cmd += ["--out", str(folder), "--quiet"]
         proc = subprocess.run(cmd, capture_output=True, text=True)
-        summary = folder / "summary.json"
-        if proc.returncode not in (0, 1) or not summary.exists():
+        if proc.returncode not in (0, 1) or not (folder / SUMMARY).exists():
             lines = (proc.stderr or proc.stdout).strip().splitlines()
             raise RuntimeError(lines[-1] if lines else f"pantohil run exited with {proc.returncode}")
-        s = json.loads(summary.read_text())
+        s = read_summary(folder)
         cf = s.get("contact_force", {})
         out = {"status": s["status"], "converged": s["converged"], "diverged": s["diverged"], "spans": s["spans"],
                "mean_N": cf.get("mean_N"), "std_N": cf.get("std_N"),
@@ -212,17 +213,14 @@ def _write_results(out: Path, rows: list[dict], columns: list[str]) -> None:
     import pandas as pd
 
     rows = sorted(rows, key=lambda r: r["point"])
-    tmp = out / "results.csv.part"
-    with open(tmp, "w", newline="") as fh:
+    with atomic_path(out / "results.csv") as part, open(part, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=columns, extrasaction="ignore")
         w.writeheader()
         for r in rows:
             w.writerow({c: ("" if r.get(c) is None else r.get(c)) for c in columns})
-    os.replace(tmp, out / "results.csv")
     frame = pd.read_csv(out / "results.csv")
-    tmp = out / "results.parquet.part"
-    frame.to_parquet(tmp, index=False)
-    os.replace(tmp, out / "results.parquet")
+    with atomic_path(out / "results.parquet") as part:
+        frame.to_parquet(part, index=False)
 
 
 def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers: int | None = None,

@@ -1,7 +1,6 @@
 """Shared fixtures: a run of the default case (made once per session) and helpers."""
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -23,9 +22,10 @@ def pantohil(*args: str, cwd: Path | None = None, timeout: float = 600) -> subpr
 
 
 def load_run(folder: Path) -> tuple[dict, np.ndarray]:
-    summary = json.loads((folder / "summary.json").read_text())
-    span = np.loadtxt(folder / "steady_span.csv", delimiter=",", skiprows=1)
-    return summary, span
+    """A HIL run folder's summary and its converged span (t_s, z0_m, z_m, f_N)."""
+    from pantohil.orchestrator.run_folder import STEADY_SPAN, read_summary, read_table
+
+    return read_summary(folder), read_table(folder, STEADY_SPAN)
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from pantohil.models.catenary.fe.asm_fit import (attenuation, dominant_wavelengt
 from pantohil.models.catenary.fe.definition import CatenaryDefinition, load_definition
 from pantohil.models.catenary.asm.closed_form import one_sided_harmonics
 from pantohil.models.catenary.fe.model import contact_wire_profile, form_find, harmonic_responses, vertical_stiffness
+from pantohil.models.storage import cache_root, write_text_atomic
 
 FIT_BANDS_HZ = ((5.0, 20.0), (10.0, 20.0), (10.0, 40.0))
 ANALYSIS_VERSION = 2
@@ -133,7 +133,7 @@ def analyse(cat: CatenaryDefinition, settings: AnalysisSettings | None = None) -
 
 def cache_dir() -> Path:
     """Folder of the cached catenary analyses ($PANTOHIL_CACHE or ~/.cache/pantohil, then catenaries/)."""
-    return Path(os.environ.get("PANTOHIL_CACHE", Path.home() / ".cache" / "pantohil")) / "catenaries"
+    return cache_root() / "catenaries"
 
 
 def cached_analysis(path: Path) -> CatenaryAnalysis:
@@ -149,7 +149,5 @@ def cached_analysis(path: Path) -> CatenaryAnalysis:
             pass  # unreadable entry: recompute and replace it
     result = analyse(cat)
     entry.parent.mkdir(parents=True, exist_ok=True)
-    tmp = entry.with_suffix(f".{os.getpid()}.part")
-    tmp.write_text(json.dumps(result.__dict__))
-    os.replace(tmp, entry)
+    write_text_atomic(entry, json.dumps(result.__dict__))
     return result

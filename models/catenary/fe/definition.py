@@ -153,8 +153,8 @@ def _presag_span(c: dict) -> str:
     return v
 
 
-def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinition:
-    """Validate the sections and keys of a parsed catenary file; CatenaryError names the key at fault."""
+def _check_sections(raw: dict) -> None:
+    """Every section and key known, the four required sections present."""
     for sec, body in raw.items():
         if sec not in _SCHEMA:
             raise CatenaryError(f"{sec}: unknown section (known: {', '.join(_SCHEMA)})")
@@ -166,8 +166,10 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
     for sec in ("catenary", "contact_wire", "messenger_wire", "droppers"):
         if sec not in raw:
             raise CatenaryError(f"{sec}: missing section")
-    c = raw["catenary"]
-    span = _num(c, "catenary", "span_m", positive=True)
+
+
+def _dropper_positions(c: dict, span: float) -> tuple[float, ...]:
+    """Dropper positions from the span's first support, from `dropper_spacing_m` or `dropper_positions_m`."""
     if "dropper_positions_m" in c and "dropper_spacing_m" in c:
         raise CatenaryError("catenary.dropper_positions_m: give either dropper_positions_m or dropper_spacing_m")
     if "dropper_spacing_m" in c:
@@ -187,6 +189,26 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
             raise CatenaryError("catenary.dropper_positions_m: overlapping droppers (positions must increase)")
     else:
         raise CatenaryError("catenary.dropper_spacing_m: missing (or give dropper_positions_m)")
+    return positions
+
+
+def _stitch(raw: dict, span: float) -> tuple[Wire | None, float]:
+    """The stitch wire and its length, or (None, 0) without one."""
+    if "stitch_wire" not in raw:
+        return None, 0.0
+    stitch = _wire(raw, "stitch_wire")
+    stitch_len = _num(raw["stitch_wire"], "stitch_wire", "length_m", positive=True)
+    if stitch_len >= span:
+        raise CatenaryError(f"stitch_wire.length_m: must be shorter than the span ({span:g} m)")
+    return stitch, stitch_len
+
+
+def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinition:
+    """A catenary definition from the parsed TOML of a catenary file; CatenaryError naming the key."""
+    _check_sections(raw)
+    c = raw["catenary"]
+    span = _num(c, "catenary", "span_m", positive=True)
+    positions = _dropper_positions(c, span)
     d = raw["droppers"]
     if "linear_mass_kg_m" in d:
         dmass = _num(d, "droppers", "linear_mass_kg_m", positive=True)
@@ -195,12 +217,7 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
     ea = _num(d, "droppers", "youngs_modulus_Pa", 1.1e11, positive=True) * _num(
         d, "droppers", "area_m2", 10e-6, positive=True
     )
-    stitch, stitch_len = None, 0.0
-    if "stitch_wire" in raw:
-        stitch = _wire(raw, "stitch_wire")
-        stitch_len = _num(raw["stitch_wire"], "stitch_wire", "length_m", positive=True)
-        if stitch_len >= span:
-            raise CatenaryError(f"stitch_wire.length_m: must be shorter than the span ({span:g} m)")
+    stitch, stitch_len = _stitch(raw, span)
     sa = raw.get("steady_arm", {})
     ms = raw.get("messenger_support", {})
     support_type = ms.get("type", "fixed")

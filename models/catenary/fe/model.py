@@ -212,6 +212,29 @@ def form_find(cat: CatenaryDefinition, n_spans: int = 3) -> FormFinding:
         K_up = _restrict(sec.K_wires, up_dofs) + _identity_on(cw_dofs, sec.ndof)
         z_up, _ = _solve_dirichlet(K_up, f_up, s_mw, np.full(len(s_mw), cat.encumbrance_m))
         lengths = z_up[d_up] - z_cw[d_cw]
+    _check_droppers(cat, lengths, tensions)
+    K, fixed, kd = _linearised_stiffness(cat, sec, lengths)
+    dm = cat.dropper_mass_kg_m * lengths / 2
+    lump = np.zeros(sec.ndof)
+    np.add.at(lump, d_cw, dm + cat.clamp_mass_contact_kg)
+    np.add.at(lump, d_up, dm + cat.clamp_mass_messenger_kg)
+    lump[s_cw] += cat.steady_arm_mass_kg
+    M = (sec.M_wires + sparse.diags(lump)).tocsr()
+    # check: the coupled model with droppers of unstretched length (L - F/k) meets the design heights
+    unstretched = lengths - tensions / kd
+    f = sec.f_gravity.copy()
+    np.add.at(f, d_cw, -(dm + cat.clamp_mass_contact_kg) * g - kd * unstretched)  # bar tension k (z_up - z_cw - L0)
+    np.add.at(f, d_up, -(dm + cat.clamp_mass_messenger_kg) * g + kd * unstretched)
+    f[s_cw] += -cat.steady_arm_mass_kg * g + arm  # the arm's static force; its spring acts about the design height 0
+    fixed_static = np.concatenate([s_mw, [s_cw[0], s_cw[-1]]])
+    vals = np.concatenate([np.full(len(s_mw), cat.encumbrance_m), [0.0, 0.0]])
+    z, _ = _solve_dirichlet(K, f, fixed_static, vals)
+    err = float(np.max(np.abs(z[d_cw] - design_d)))
+    return FormFinding(sec, z, lengths, tensions, arm, err, K, M, fixed)  # z: the checked static heights
+
+
+def _check_droppers(cat: CatenaryDefinition, lengths: np.ndarray, tensions: np.ndarray) -> None:
+    """Every dropper of positive length and in tension, else CatenaryError naming the key to change."""
     per_span = len(cat.dropper_positions_m)
     for i in np.flatnonzero(lengths <= 0)[:1]:
         raise CatenaryError(f"catenary.presag_m: dropper {i % per_span + 1} would need a length of {lengths[i]:.3f} m "
@@ -220,7 +243,15 @@ def form_find(cat: CatenaryDefinition, n_spans: int = 3) -> FormFinding:
         key = "catenary.presag_m" if cat.presag_m != 0 else "catenary.dropper_positions_m"
         raise CatenaryError(f"{key}: dropper {i % per_span + 1} would be in compression ({tensions[i]:.1f} N) to hold "
                             f"the design heights")
-    # linearised stiffness: droppers as bars, steady arms as springs, messenger supports
+
+
+def _linearised_stiffness(cat: CatenaryDefinition, sec, lengths: np.ndarray):
+    """(K, fixed dofs, dropper stiffnesses) about the static state: droppers as bars, steady arms as springs,
+    messenger supports fixed or elastic."""
+    d_cw = np.array([d[1] for d in sec.droppers])
+    d_up = np.array([d[2] for d in sec.droppers])
+    s_cw = np.array([s[1] for s in sec.supports])
+    s_mw = np.array([s[2] for s in sec.supports])
     kd = cat.dropper_axial_stiffness_N / np.maximum(lengths, 1e-6)
     extra_r, extra_c, extra_v = [], [], []
     for a, b, k in zip(d_cw, d_up, kd, strict=False):
@@ -240,23 +271,7 @@ def form_find(cat: CatenaryDefinition, n_spans: int = 3) -> FormFinding:
     else:
         fixed = np.concatenate([s_mw, [s_cw[0], s_cw[-1]]])
     K = (sec.K_wires + sparse.csr_matrix((extra_v, (extra_r, extra_c)), shape=sec.K_wires.shape)).tocsr()
-    dm = cat.dropper_mass_kg_m * lengths / 2
-    lump = np.zeros(sec.ndof)
-    np.add.at(lump, d_cw, dm + cat.clamp_mass_contact_kg)
-    np.add.at(lump, d_up, dm + cat.clamp_mass_messenger_kg)
-    lump[s_cw] += cat.steady_arm_mass_kg
-    M = (sec.M_wires + sparse.diags(lump)).tocsr()
-    # check: the coupled model with droppers of unstretched length (L - F/k) meets the design heights
-    unstretched = lengths - tensions / kd
-    f = sec.f_gravity.copy()
-    np.add.at(f, d_cw, -(dm + cat.clamp_mass_contact_kg) * g - kd * unstretched)  # bar tension k (z_up - z_cw - L0)
-    np.add.at(f, d_up, -(dm + cat.clamp_mass_messenger_kg) * g + kd * unstretched)
-    f[s_cw] += -cat.steady_arm_mass_kg * g + arm  # the arm's static force; its spring acts about the design height 0
-    fixed_static = np.concatenate([s_mw, [s_cw[0], s_cw[-1]]])
-    vals = np.concatenate([np.full(len(s_mw), cat.encumbrance_m), [0.0, 0.0]])
-    z, _ = _solve_dirichlet(K, f, fixed_static, vals)
-    err = float(np.max(np.abs(z[d_cw] - design_d)))
-    return FormFinding(sec, z, lengths, tensions, arm, err, K, M, fixed)  # z: the checked static heights
+    return K, fixed, kd
 
 
 def _mask(v: np.ndarray, keep: set) -> np.ndarray:

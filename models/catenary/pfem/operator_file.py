@@ -5,7 +5,6 @@ with one line."""
 from __future__ import annotations
 
 import json
-import os
 import zipfile
 from dataclasses import asdict
 from pathlib import Path
@@ -13,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.catenary.pfem.operators import PfemOperators, PfemSettings
+from pantohil.models.storage import atomic_path
 
 FORMAT_VERSION = 1
 _ARRAYS = {"cc": np.float32, "dc": np.complex64, "cd": np.float32, "dd": np.complex64, "z0": np.float64,
@@ -29,15 +29,9 @@ def save_operators(ops: PfemOperators, path: Path, key: str) -> int:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     meta = {"format_version": FORMAT_VERSION, "key": key, "settings": asdict(ops.settings), "info": ops.info}
-    part = path.with_name(path.name + ".part")
-    try:
-        with open(part, "wb") as fh:
-            np.savez(fh, meta=np.array(json.dumps(meta)),
-                     **{name: np.asarray(getattr(ops, name)).astype(t) for name, t in _ARRAYS.items()})
-        os.replace(part, path)
-    finally:
-        if part.exists():
-            part.unlink()
+    with atomic_path(path) as part, open(part, "wb") as fh:
+        np.savez(fh, meta=np.array(json.dumps(meta)),
+                 **{name: np.asarray(getattr(ops, name)).astype(t) for name, t in _ARRAYS.items()})
     return path.stat().st_size
 
 
