@@ -49,7 +49,8 @@ def fmu_parameters(case: Case, delay_steps: int,
         "catenary": {"speed": case.speed_m_s, "time_step": case.dt_s, "samples_per_span": case.samples_per_span},
         "pantograph": {"n_masses": pan.n, "reference_height": case.reference_height_m(), "time_step": case.dt_s},
         "rig": {"time_step": case.dt_s},
-        "adapter": {"rig_host": rig_address[0], "rig_port": rig_address[1], "time_step": case.dt_s},
+        "adapter": {"rig_host": rig_address[0], "rig_port": rig_address[1], "time_step": case.dt_s,
+                    "local_host": case.values["link"]["local_host"], "key_file": case.values["link"]["key_file"]},
     }
     return {name: {**fmu_support.case_values(name, case.values, resolved), **extra} for name, extra in derived.items()}
 

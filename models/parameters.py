@@ -173,6 +173,12 @@ class LinkSection:
     tolerated_losses: int = param(50, "1", "consecutive missing answers before a fault", 0, 1_000_000,
                                   fmu="adapter")
     local_port: int = param(0, "1", "local UDP port (0: any free port)", 0, 65535, fmu="adapter")
+    local_host: str = param("", "1", "local address to bind (empty: the interface that reaches the rig)")
+    key_file: str = param("", "1", "pre-shared key file authenticating every datagram (HMAC-SHA256); empty: none")
+    paced_by: str = param("model", "1", "who owns the clock: the model (a COMMAND per step) or the rig (a SAMPLE "
+                                        "per rig tick, answered at once)", choices=("model", "rig"), fmu="adapter")
+    sample_timeout_s: float = param(0.5, "s", "rig-paced: silence of the rig after which the link is in fault",
+                                    1e-3, 60.0, fmu="adapter")
 
 
 @dataclass(frozen=True)
@@ -223,6 +229,8 @@ class RunSection:
     speed_kmh: float = param(REQUIRED, "km/h", "pantograph speed", 1.0, 600.0)
     dt_s: float = param(0.001, "s", "target time step; adjusted to fit the span", 1e-5, 0.1)
     max_spans: int = param(200, "1", "span limit", 1, MAX_SPANS)
+    duration_s: float = param(0.0, "s", "run this long (whole spans), converged or not, as a rig's fixed-length "
+                                        "test (Paper D: 120 s); 0: stop at convergence", 0.0, 1e6)
     convergence_tol: float = param(1e-4, "1", "rms span-to-span change / std", 0.0, 1.0, low_open=True)
     force_limit_N: float = param(2000.0, "N", "|force| beyond this is divergence", 0.0, 1e6, low_open=True)
     height_limit_m: float = param(1.0, "m", "|height| beyond this is divergence", 0.0, 100.0, low_open=True)

@@ -38,12 +38,12 @@ def save(out_dir: Path, master, monitor, span: int, run_info: dict) -> None:
     arrays = {f"fmu_state/{name}": np.frombuffer(data, dtype=np.uint8) for name, data in states.items()}
     for name in master.names:
         arrays[f"values/{name}"] = np.asarray(master.values[name], dtype=float)
-        arrays[f"record/{name}"] = master.record[name][start:stop]
-        arrays[f"step_ns/{name}"] = master.step_ns[name][start:stop]
+        arrays[f"record/{name}"] = master.record[name][master.rows(start, stop)]
+        arrays[f"step_ns/{name}"] = master.step_ns[name][master.rows(start, stop)]
         if name in master.record_int:
-            arrays[f"record_int/{name}"] = master.record_int[name][start:stop]
+            arrays[f"record_int/{name}"] = master.record_int[name][master.rows(start, stop)]
         if name in master.record_in:
-            arrays[f"record_in/{name}"] = master.record_in[name][start:stop]
+            arrays[f"record_in/{name}"] = master.record_in[name][master.rows(start, stop)]
     if monitor._prev is not None:
         arrays["monitor/previous_force"] = monitor._prev
     part = folder / (ARRAYS + ".part")
@@ -87,12 +87,12 @@ def restore(checkpoint: dict, master, monitor, fmus: dict[str, Path]) -> int:
     master.record_start = start
     for name in master.names:
         master.values[name] = [float(v) for v in arrays[f"values/{name}"]]
-        master.record[name][start:k] = arrays[f"record/{name}"]
-        master.step_ns[name][start:k] = arrays[f"step_ns/{name}"]
+        master.record[name][master.rows(start, k)] = arrays[f"record/{name}"]
+        master.step_ns[name][master.rows(start, k)] = arrays[f"step_ns/{name}"]
         if name in master.record_int:
-            master.record_int[name][start:k] = arrays[f"record_int/{name}"]
+            master.record_int[name][master.rows(start, k)] = arrays[f"record_int/{name}"]
         if name in master.record_in:
-            master.record_in[name][start:k] = arrays[f"record_in/{name}"]
+            master.record_in[name][master.rows(start, k)] = arrays[f"record_in/{name}"]
     monitor.history = [dict(h) for h in meta["history"]]
     monitor._prev = arrays.get("monitor/previous_force")
     return span + 1

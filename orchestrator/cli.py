@@ -75,9 +75,13 @@ def _add_run_command(sub) -> None:
                      help="co-simulation master: pantohil's fmpy master or OSP's libcosim (default fmpy)")
     run.add_argument("--hardware", metavar="HOST:PORT",
                      help="run against a rig controller (or `pantohil rig-emulator`) through the adapter FMU")
+    run.add_argument("--paced-by", choices=("model", "rig"),
+                     help="with --hardware: who owns the clock (default: the case's link.paced_by, model); rig: "
+                          "the adapter takes one rig sample per step, so the rig paces any master")
     run.add_argument("--realtime", action="store_true", help="pace the master against the wall clock at dt")
     run.add_argument("--rt-priority", type=number(0, 99, integer=True), default=50, metavar="P",
-                     help="with --realtime: SCHED_FIFO priority if permitted (0: normal scheduling; default 50)")
+                     help="with --realtime or rig-paced: SCHED_FIFO priority if permitted (0: normal scheduling; "
+                          "default 50)")
     run.add_argument("--live", nargs="?", const="", metavar="HOST:PORT",
                      help="serve the run's channels to Foxglove over WebSocket while it runs (default "
                           "127.0.0.1:8765; port 0 picks a free one); open docs/foxglove/pantohil-layout.json")
@@ -99,7 +103,15 @@ def _add_watch_command(sub) -> None:
 
 def _add_rig_emulator_command(sub) -> None:
     """`pantohil rig-emulator` and its options."""
-    emu = sub.add_parser("rig-emulator", help="play a rig controller over UDP for a case (lockstep, fault injection)")
+    emu = sub.add_parser("rig-emulator", help="play a rig controller over UDP for a case (lockstep or on its own "
+                                              "clock, fault injection)")
+    emu.add_argument("--paced-by", choices=("model", "rig"), default="model",
+                     help="model: answer each COMMAND (lockstep, default); rig: a free-running loop sending a "
+                          "SAMPLE every tick")
+    emu.add_argument("--drift-ppm", type=number(-1e4, 1e4, unit="ppm"), default=0.0, metavar="P",
+                     help="rig-paced: the rig clock's rate error against the nominal dt [ppm]")
+    emu.add_argument("--jitter-us", type=number(0.0, 1e5, unit="us"), default=0.0, metavar="J",
+                     help="rig-paced: each tick moved by a uniform random time in [-J, J] us")
     emu.add_argument("--listen", required=True, metavar="HOST:PORT", help="address to listen on")
     emu.add_argument("--case", type=Path, help="case file (TOML); default: the built-in case")
     emu.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
@@ -111,6 +123,10 @@ def _add_rig_emulator_command(sub) -> None:
     )
     emu.add_argument("--seed", type=number(0, 2**31 - 1, integer=True), default=0, help="seed of the fault injection")
     emu.add_argument("--stats", type=Path, help="write the emulator's counters to this JSON file")
+    emu.add_argument("--key-file", type=Path, help="pre-shared key: accept and send only datagrams authenticated "
+                                                   "with it (HMAC-SHA256)")
+    emu.add_argument("--session-timeout-s", type=number(0.01, 3600.0, unit="s"), default=5.0, metavar="S",
+                     help="end a session whose master has been silent this long (default 5 s)")
     emu.add_argument(
         "--max-seconds", type=number(0.0, 1e7, unit="s"), help="stop after this long (default: until SIGTERM/Ctrl-C)"
     )
@@ -289,6 +305,17 @@ def _hardware_endpoint(text: str | None) -> tuple[str, int] | None:
     return hardware
 
 
+def _check_key_file(case) -> None:
+    """link.key_file, read once before anything is written: one line if it is not a usable key."""
+    if case.values["link"]["key_file"]:
+        from pantohil.fmus.udp_protocol import read_key
+
+        try:
+            read_key(case.values["link"]["key_file"])
+        except ValueError as exc:
+            raise CaseError(f"link.key_file: {exc}") from None
+
+
 def _print_run(result, out: Path) -> None:
     print(f"{result.status}: {result.message}")
     cf = result.contact_force
@@ -304,6 +331,10 @@ def _print_run(result, out: Path) -> None:
         from pantohil.orchestrator.hil_run import LINK_COUNTERS
 
         print("link: " + ", ".join(f"{k} {result.link[k]}" for k in LINK_COUNTERS))
+        if "answer_us" in result.link:
+            ln, a = result.link, result.link["answer_us"]
+            print(f"rig-paced: {ln['samples']} samples, {ln['answered']} answered, {ln['reused']} reused by the rig; "
+                  f"answer p50 {a['p50']:.0f} us, p99 {a['p99']:.0f} us, max {a['max']:.0f} us")
     print(f"run folder: {out}")
     if result.status in ("link_lost", "interrupted"):
         print(f"pantohil: {'error: ' if result.status == 'link_lost' else ''}{result.message}", file=sys.stderr)
@@ -313,6 +344,10 @@ def _cmd_run(args, stop) -> int:
     from pantohil.orchestrator.hil_run import RunInterrupted, run_case
     from pantohil.orchestrator.run_folder import RunFolderError, default_run_folder
 
+    if args.paced_by is not None:
+        if args.hardware is None:
+            raise CaseError("--paced-by: only with --hardware (a virtual run has no rig clock)")
+        args.overrides = [*args.overrides, f"link.paced_by={args.paced_by}"]
     with contextlib.ExitStack() as cleanup:
         system = None
         resume = None
@@ -341,6 +376,8 @@ def _cmd_run(args, stop) -> int:
         elif system is None:
             checkpoint_info = {"case_file": str(Path(case.source).resolve()), "overrides": list(args.overrides)}
         hardware = _hardware_endpoint(args.hardware)
+        if hardware is not None:
+            _check_key_file(case)
         if args.live_wait and args.live is None:
             raise CaseError("--live-wait: needs --live")
         live = _live_endpoint(args.live) if args.live is not None else None
@@ -388,24 +425,30 @@ def _cmd_watch(args) -> int:
 
 
 def _cmd_emulator(args) -> int:
-    from pantohil.fmus.udp_protocol import parse_endpoint
-    from pantohil.orchestrator.rig_emulator import Faults, RigEmulator
+    from pantohil.fmus.udp_protocol import parse_endpoint, read_key
+    from pantohil.orchestrator.rig_emulator import Faults, RigEmulator, RigPacing
 
     case = load_case(args.case, args.overrides)
     try:
         listen = parse_endpoint(args.listen, listening=True)
         faults = Faults(args.loss, args.reorder, args.duplicate, args.corrupt, args.delay_us, args.seed)
+        pacing = RigPacing(args.paced_by, args.drift_ppm, args.jitter_us, args.seed)
     except ValueError as exc:
         raise CaseError(f"--listen: {exc}" if "HOST:PORT" in str(exc) else str(exc)) from None
     try:
-        emulator = RigEmulator(case, listen, faults, args.stats)
+        key = read_key(str(args.key_file)) if args.key_file is not None else None
+    except ValueError as exc:
+        raise CaseError(f"--key-file: {exc}") from None
+    try:
+        emulator = RigEmulator(case, listen, faults, args.stats, key, args.session_timeout_s,
+                               announce=lambda line: print(line, flush=True), pacing=pacing)
     except OSError as exc:
         raise CaseError(f"--listen: cannot listen on {args.listen}: {exc.strerror}") from None
     from pantohil.orchestrator.pacing import set_realtime_priority
 
     scheduling = set_realtime_priority(args.rt_priority)
-    print(f"rig emulator for {case.name} listening on {emulator.address[0]}:{emulator.address[1]} ({scheduling})",
-          flush=True)
+    print(f"rig emulator for {case.name} listening on {emulator.address[0]}:{emulator.address[1]} "
+          f"({args.paced_by}-paced, {scheduling})", flush=True)
     emulator.serve(args.max_seconds)
     return 0
 

@@ -11,6 +11,8 @@ between steps; the run then ends at a step boundary with status `interrupted` an
 """
 from __future__ import annotations
 
+import gc
+import math
 import os
 import time
 from contextlib import nullcontext, suppress
@@ -37,6 +39,7 @@ from . import checkpoint
 from .master import JacobiMaster
 from .pacing import Pacer, set_realtime_priority
 from .recorder import McapRecorder
+from .rig_clock import Percentiles
 from .run_folder import claimed_run_folder
 from .run_observers import CheckpointObserver, LiveObserver, McapObserver, RunObserver
 from .run_summary import EXIT_LINK_LOST, RunSummary
@@ -74,9 +77,18 @@ HARDWARE = Topology("hardware", HARDWARE_FMU_NAMES, HARDWARE_CONNECTIONS, {
                  "measured_force": "force from the rig (NaN: no answer) [N]",
                  "actuator_height": "actuator height reported by the rig [m]",
                  "link_state": "0 ok, 1 missing, 2 fault", "sent": "[-]", "received": "[-]", "lost": "[-]",
-                 "late": "[-]", "reordered": "[-]", "duplicated": "[-]", "malformed": "[-]", "limited": "[-]"},
+                 "late": "[-]", "reordered": "[-]", "duplicated": "[-]", "malformed": "[-]", "foreign": "[-]",
+                 "nonfinite": "[-]", "limited": "[-]"},
 }, ("adapter", "measured_force"))
-LINK_COUNTERS = ("sent", "received", "lost", "late", "reordered", "duplicated", "malformed", "limited")
+RIG_PACED_FIELDS = {"answer_time": "rig-paced: from the sample reaching the socket to the answer [s]",
+                    "samples": "rig samples received in time [-]", "answered": "samples answered [-]",
+                    "reused": "rig ticks that reused an old answer (the rig's count) [-]"}
+LINK_COUNTERS = ("sent", "received", "lost", "late", "reordered", "duplicated", "malformed", "foreign", "nonfinite",
+                 "limited")
+RIG_PACED_COUNTERS = ("samples", "answered", "reused")
+REFUSALS = {1: "it speaks another protocol version", 2: "it refused the session start (bad HELLO)",
+            4: "it is busy with another session", 8: "it does not run that pacing (link.paced_by)"}
+RECORDED_SPANS = 12  # spans the master keeps in memory: the last one, the one before and the 10 of the overlay plot
 
 
 class RunInterrupted(Exception):
@@ -135,6 +147,7 @@ class RunState:
     per_step_us: dict = field(default_factory=dict)
     realtime: dict | None = None
     link: dict | None = None
+    answer_us: Percentiles | None = None  # rig-paced: the answer times, streamed (memory bounded)
     live: dict | None = None
     first_span: int = 0  # a resumed run starts after its checkpoint's span
     logged_groups: dict = field(default_factory=dict)  # what run.mcap logs per step (with /master if paced)
@@ -148,6 +161,15 @@ class RunState:
     def topology(self) -> Topology:
         """The system being stepped."""
         return self.prepared.topology
+
+    @property
+    def rig_paced(self) -> bool:
+        """A hardware run whose rig owns the clock."""
+        return is_rig_paced(self.case, self.prepared.options)
+
+
+def is_rig_paced(case: Case, options: RunOptions) -> bool:
+    return options.hardware is not None and case.values["link"]["paced_by"] == "rig"
 
 
 def delay_plan(case: Case, topology: Topology = VIRTUAL) -> dict:
@@ -183,9 +205,21 @@ def run_topology(case: Case, options: RunOptions) -> Topology:
     """The loop of the run, with the dropper corrections logged beside the catenary for a slackening PFEM."""
     if options.master_kind not in MASTERS:
         raise CaseError(f"master: must be one of {', '.join(MASTERS)} (got {options.master_kind!r})")
-    if options.hardware is not None and (options.system is not None or options.master_kind != "fmpy"):
-        raise CaseError("hardware: a hardware run uses the fmpy master and a case file")
+    rig_paced = is_rig_paced(case, options)
+    if options.hardware is not None and (options.system is not None or
+                                         (options.master_kind != "fmpy" and not rig_paced)):
+        raise CaseError("hardware: a hardware run uses a case file, and the fmpy master unless it is rig-paced")
+    if rig_paced and options.realtime:
+        raise CaseError("--realtime: a rig-paced run goes at the rig's pace; drop --realtime")
+    run = case.values["run"]
+    duration_spans = -(-round(run["duration_s"] / case.dt_s) // case.samples_per_span)
+    if duration_spans > run["max_spans"]:
+        raise CaseError(f"run.duration_s: {run['duration_s']:g} s is {duration_spans} spans, more than "
+                        f"run.max_spans = {run['max_spans']}")
     topology = HARDWARE if options.hardware is not None else VIRTUAL
+    if rig_paced:
+        topology = replace(topology, groups={**topology.groups, "/adapter": {**topology.groups["/adapter"],
+                                                                             **RIG_PACED_FIELDS}})
     if case.model == "pfem" and case.values["pfem"]["droppers"]:
         extra = {f"dropper_correction_{d + 1}": f"correction force of dropper {d + 1} at this step [N]"
                  for d in range(len(case_dropper_positions(case)))}
@@ -281,7 +315,7 @@ def start(state: RunState) -> None:
                                 "duration_us": "wall time of the step [us]"}} if options.realtime else {}
     state.logged_groups = prepared.topology.groups | pacing_group
     mcap = _recorder(prepared, state.logged_groups)
-    capacity = case.values["run"]["max_spans"] * case.samples_per_span
+    capacity = min(case.values["run"]["max_spans"], RECORDED_SPANS) * case.samples_per_span  # bounded rings
     try:
         if options.master_kind == "libcosim":
             from .libcosim_master import LibcosimMaster
@@ -302,9 +336,12 @@ def start(state: RunState) -> None:
             mcap.recorder.close()
             state.master.close()
             raise
-    state.pacer = Pacer(case.dt_s, capacity) if options.realtime else None
+    state.pacer = Pacer(case.dt_s, case.values["run"]["max_spans"] * case.samples_per_span) if options.realtime else None
     state.master.pacer = state.pacer
-    state.scheduling = set_realtime_priority(options.rt_priority) if options.realtime else "normal"
+    # a rig-paced master sleeps on the rig's samples, so it may take the real-time priority too
+    paced = options.realtime or state.rig_paced
+    state.scheduling = set_realtime_priority(options.rt_priority) if paced else "normal"
+    state.answer_us = Percentiles() if state.rig_paced else None
     state.status = "span_limit"
     state.message = f"not converged within run.max_spans = {case.values['run']['max_spans']} spans"
     try:
@@ -332,10 +369,13 @@ def step_until_done(state: RunState) -> None:
                      desc=case.name, disable=None if state.prepared.options.progress else True)
     t_start, cpu_start = time.perf_counter(), time.process_time()
     try:
-        if hardware is not None and _link_state_now(state.master) == LINK_FAULT:
-            raise _Stop("link_lost", f"the rig at {hardware[0]}:{hardware[1]} did not answer the session start")
+        if hardware is not None and state.prepared.options.master_kind == "fmpy":
+            _check_session_start(state.master, hardware)
         if state.pacer is not None:
             state.pacer.start()
+        elif state.rig_paced:  # no pacer: keep collection pauses out of the rig's deadlines here too
+            gc.collect()
+            gc.disable()
         for span in range(state.first_span, case.values["run"]["max_spans"]):
             outcome = step_span(state, span)
             if outcome is not None:
@@ -344,6 +384,8 @@ def step_until_done(state: RunState) -> None:
     except _Stop as stop:
         state.status, state.message = stop.status, str(stop)
     finally:
+        if state.rig_paced and state.pacer is None:
+            gc.enable()
         state.wall_s, state.cpu_s = time.perf_counter() - t_start, time.process_time() - cpu_start
         end_stepping(state)
 
@@ -375,10 +417,12 @@ def _steps(state: RunState, span: int) -> str | None:
         if not (abs(out[i_f]) <= f_lim and abs(out[i_z]) <= z_lim):  # also catches NaN
             raise _Stop("diverged", f"diverged at t = {master.k * dt:.3f} s (span {span}): force {out[i_f]:.4g} N, "
                                     f"height {out[i_z]:.4g} m beyond run.force_limit_N / run.height_limit_m")
-        if link_col is not None and master.record_int["adapter"][k, link_col] == LINK_FAULT:
-            raise _Stop("link_lost", f"link to the rig lost at t = {master.k * dt:.3f} s: more than "
-                                     f"{state.case.values['link']['tolerated_losses']} consecutive answers missing; "
-                                     f"last position held")
+        if link_col is not None and master.int_value("adapter", "link_state", k) == LINK_FAULT:
+            if k == 0 and not master.int_value("adapter", "session_started", 0):
+                raise _Stop("link_lost", _session_refused(master.int_value("adapter", "rig_refusal", 0),
+                                                          state.prepared.options.hardware))
+            raise _Stop("link_lost", f"link to the rig lost at t = {master.k * dt:.3f} s: "
+                                     f"{_link_fault_reason(state.case, state.rig_paced)}; last position held")
         for observer in step_observers:
             observer.on_step(state, k)
     return None
@@ -391,6 +435,10 @@ def step_span(state: RunState, span: int) -> tuple[str, str] | None:
     if _steps(state, span) == "interrupted":
         return "interrupted", f"interrupted at t = {master.k * dt:.3f} s ({state.stop.signal_name}), in span {span}"
     start = span * n
+    if state.answer_us is not None:
+        for seconds in master.column("adapter", "answer_time", start, start + n):
+            if not math.isnan(seconds):  # NaN: no sample for that step
+                state.answer_us.add(seconds * 1e6)
     rec = state.monitor.close_span(span, master.column("catenary", "force_at_sample", start, start + n))
     for observer in state.observers:
         observer.on_span(state, span, rec)
@@ -400,7 +448,12 @@ def step_span(state: RunState, span: int) -> tuple[str, str] | None:
     if not master.column(fmu, output, start, start + n).any():
         return "contact_lost", (f"contact lost: the contact force was 0 N for the whole span {span} "
                                 f"(t = {start * dt:.3f}-{(start + n) * dt:.3f} s)")
-    if start >= case.ramp_steps and span >= 2 and rec["change"] <= run["convergence_tol"]:
+    settled = start >= case.ramp_steps and span >= 2 and rec["change"] <= run["convergence_tol"]
+    duration_spans = -(-round(run["duration_s"] / dt) // n)
+    if duration_spans and span + 1 >= duration_spans:
+        return (("converged", f"converged; ran {span + 1} spans (run.duration_s)") if settled else
+                ("span_limit", f"not converged after run.duration_s = {run['duration_s']:g} s"))
+    if settled and not duration_spans:
         return "converged", f"converged after {span + 1} spans"
     median = state.monitor.diverging(run["divergence_spans"], run["divergence_change"], -(-case.ramp_steps // n) + 1)
     if median is not None:
@@ -413,18 +466,27 @@ def step_span(state: RunState, span: int) -> tuple[str, str] | None:
 def end_stepping(state: RunState) -> None:
     """Close the pacing, the progress bar, the observers (the MCAP file is finished here) and the master."""
     master = state.master
+    hardware = state.prepared.options.hardware
+    closed = False
     try:
         if state.pacer is not None:
             state.pacer.stop()
         state.bar.close()
+        if hardware is not None:  # the rig's session ends (BYE) with the last step, not after the log is written
+            state.per_step_us = master.per_step_us()
+            state.link = _link_summary(state)
+            closed = True
+            master.close()
         _end_observers(state)
     finally:
-        state.per_step_us = master.per_step_us()
-        if state.prepared.options.hardware is not None:
-            state.link = _link_summary(master, state.prepared.options.hardware)
-        master.close()
+        if not closed:
+            state.per_step_us = master.per_step_us()
+            if hardware is not None:
+                state.link = _link_summary(state)
+            master.close()
         if state.pacer is not None:
             state.realtime = {**state.pacer.summary(), "scheduling": state.scheduling}
+        if state.pacer is not None or state.rig_paced:
             set_realtime_priority(None)
             _back_to_normal()
 
@@ -441,23 +503,44 @@ def _end_observers(state: RunState) -> None:
         raise failure
 
 
-def _link_summary(master, hardware: tuple) -> dict:
+def _link_summary(state: RunState) -> dict:
+    master, hardware = state.master, state.prepared.options.hardware
     last = max(master.k - 1, 0)
-    names = master.int_outputs["adapter"]
-    link = {c: int(master.record_int["adapter"][last, names.index(c)]) for c in LINK_COUNTERS}
+    counters = LINK_COUNTERS + (RIG_PACED_COUNTERS if state.rig_paced else ())
+    link = {c: master.int_value("adapter", c, last) for c in counters}
+    link["paced_by"] = state.case.values["link"]["paced_by"]
+    if state.rig_paced:
+        link["scheduling"] = state.scheduling
+        link["answer_us"] = {q: state.answer_us.summary()[q] for q in ("p50", "p99", "max")}
     link["rig"] = f"{hardware[0]}:{hardware[1]}"
-    link["rig_latency_steps"] = int(master.record_int["adapter"][last, names.index("rig_latency_steps")])
+    link["rig_latency_steps"] = master.int_value("adapter", "rig_latency_steps", last)
     return link
+
+
+def _link_fault_reason(case: Case, rig_paced: bool) -> str:
+    link = case.values["link"]
+    if rig_paced:
+        return (f"no sample from the rig for link.sample_timeout_s = {link['sample_timeout_s']:g} s, or more than "
+                f"{link['tolerated_losses']} consecutive samples missing")
+    return f"more than {link['tolerated_losses']} consecutive answers missing"
+
+
+def _session_refused(refusal: int, hardware: tuple) -> str:
+    why = "; ".join(text for bit, text in REFUSALS.items() if refusal & bit) or "it did not answer"
+    return f"the rig at {hardware[0]}:{hardware[1]} did not accept the session start: {why}"
+
+
+def _check_session_start(master, hardware: tuple) -> None:
+    """After initialisation (masters that can be asked before stepping): a session the rig did not
+    accept stops the run, saying why."""
+    values = master.instances["adapter"].get_values(["link_state", "session_started", "rig_refusal"])
+    if values["link_state"] == LINK_FAULT and not values["session_started"]:
+        raise _Stop("link_lost", _session_refused(int(values["rig_refusal"]), hardware))
 
 
 def _back_to_normal() -> None:
     with suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-
-
-def _link_state_now(master) -> int:
-    """The adapter's link state right after initialisation (before any step)."""
-    return int(master.instances["adapter"].get_values(["link_state"])["link_state"])
 
 
 def summarise(state: RunState) -> RunSummary:

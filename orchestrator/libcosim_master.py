@@ -72,23 +72,25 @@ class LibcosimMaster(RecordingMaster):
     def step(self) -> None:
         """Advance libcosim by one step and record the watched outputs and inputs of that step."""
         k, obs = self.k, self._observer
+        row = k % self.capacity
         t0 = time.perf_counter_ns()
         if not self._ex.step():
             raise RuntimeError(f"libcosim step {k} failed")
-        self.step_ns[self.names[0]][k] = time.perf_counter_ns() - t0
+        self.step_ns[self.names[0]][row] = time.perf_counter_ns() - t0
         for n, idx, reals, ints, inputs in self._reads:
             out = obs.last_real_values(idx, reals)
             self.values[n] = out
-            self.record[n][k] = out
+            self.record[n][row] = out
             if ints:
-                self.record_int[n][k] = obs.last_integer_values(idx, ints)
+                self.record_int[n][row] = obs.last_integer_values(idx, ints)
             if inputs:
-                self.record_in[n][k] = obs.last_real_values(idx, inputs)
+                self.record_in[n][row] = obs.last_real_values(idx, inputs)
         self.k = k + 1
 
     def per_step_us(self) -> dict[str, float]:
         """libcosim steps all FMUs in one call: one figure for the whole step."""
-        return {"libcosim": float(np.median(self.step_ns[self.names[0]][: self.k])) / 1000.0} if self.k else {}
+        held = min(self.k, self.capacity)
+        return {"libcosim": float(np.median(self.step_ns[self.names[0]][:held])) / 1000.0} if self.k else {}
 
     def close(self) -> None:
         """Release the execution (its slaves are freed when it is collected; the FMU libraries stay loaded)."""

@@ -13,9 +13,13 @@ from .fmu_runtime import FmuInstance
 
 class RecordingMaster:
     """What every master records: each FMU's real and integer outputs and the inputs it was given,
-    step by step, plus the wall time of each FMU's step (where the master can tell)."""
+    step by step, plus the wall time of each FMU's step (where the master can tell).
+
+    The records are rings of `capacity` steps: step k is row k % capacity, so a run of any length
+    keeps the last `capacity` steps (what the caller logs and summarises), never more."""
 
     def _init_records(self, descriptions: dict, connections, capacity: int) -> None:
+        self.capacity = capacity
         self.real_outputs = {n: [v.name for v in d.modelVariables if v.causality == "output" and v.type == "Real"]
                              for n, d in descriptions.items()}
         self.int_outputs = {n: [v.name for v in d.modelVariables if v.causality == "output" and v.type == "Integer"]
@@ -33,26 +37,42 @@ class RecordingMaster:
         self.step_ns = {n: np.zeros(capacity, dtype=np.int64) for n in self.names}
         self.k = 0
 
+    def rows(self, start: int, stop: int):
+        """Ring rows of steps start..stop-1 (a slice unless they wrap); only the last `capacity` steps
+        are kept."""
+        count = max(stop - start, 0)
+        if count and (start < self.k - self.capacity or count > self.capacity):
+            raise IndexError(f"steps {start}..{stop} are no longer recorded (the last {self.capacity} are)")
+        first = start % self.capacity if count else 0
+        if first + count <= self.capacity:
+            return slice(first, first + count)
+        return np.arange(start, stop) % self.capacity
+
     def column(self, fmu: str, output: str, start: int = 0, stop: int | None = None) -> np.ndarray:
         """The recorded values of an FMU output over steps start..stop."""
         stop = self.k if stop is None else stop
         if output in self.real_outputs[fmu]:
-            return self.record[fmu][start:stop, self.real_outputs[fmu].index(output)]
-        return self.record_int[fmu][start:stop, self.int_outputs[fmu].index(output)]
+            return self.record[fmu][self.rows(start, stop), self.real_outputs[fmu].index(output)]
+        return self.record_int[fmu][self.rows(start, stop), self.int_outputs[fmu].index(output)]
 
     def input_column(self, fmu: str, src: str, output: str, start: int = 0, stop: int | None = None) -> np.ndarray:
         """The recorded values an FMU received from output `output` of `src` over steps start..stop."""
         stop = self.k if stop is None else stop
         j = self._in_map[fmu].index((src, self.real_outputs[src].index(output)))
-        return self.record_in[fmu][start:stop, j]
+        return self.record_in[fmu][self.rows(start, stop), j]
+
+    def int_value(self, fmu: str, output: str, k: int) -> int:
+        """An integer output after step k (one of the last `capacity` steps)."""
+        return int(self.record_int[fmu][k % self.capacity, self.int_outputs[fmu].index(output)])
 
     record_start = 0  # first step recorded (a resumed run records from its checkpoint's span on)
 
     def per_step_us(self) -> dict[str, float]:
-        """Median time per step of each FMU over the recorded steps [us]."""
-        if self.k <= self.record_start:
+        """Median time per step of each FMU over the recorded steps still held [us]."""
+        first = max(self.record_start, self.k - self.capacity)
+        if self.k <= first:
             return {}
-        steps = slice(self.record_start, self.k)
+        steps = self.rows(first, self.k)
         return {n: float(np.median(self.step_ns[n][steps])) / 1000.0 for n in self.step_ns}
 
 
@@ -91,6 +111,7 @@ class JacobiMaster(RecordingMaster):
     def step(self) -> None:
         """One communication step of length dt (Jacobi)."""
         k = self.k
+        row = k % self.capacity
         t = k * self.dt
         values, clock = self.values, time.perf_counter_ns
         new_values = {}
@@ -99,14 +120,14 @@ class JacobiMaster(RecordingMaster):
             if in_port is not None:
                 u = [values[src][j] for src, j in wiring]
                 in_port.write(u)
-                rec_in[k] = u
+                rec_in[row] = u
             inst.do_step(t, self.dt)
             out = out_port.read()
             if int_port is not None:
-                rec_int[k] = int_port.read()
-            ns[k] = clock() - t0
+                rec_int[row] = int_port.read()
+            ns[row] = clock() - t0
             new_values[n] = out
-            rec[k] = out
+            rec[row] = out
         self.values = new_values
         self.k = k + 1
 

@@ -1,10 +1,13 @@
 """`pantohil rig-emulator`: a process that plays the rig's real-time controller over UDP.
 
-It answers each COMMAND with a FORCE: the case's rig model (delay, N_com ramp, servo, load cell,
-offset, noise) moves the actuator and the case's pantograph model gives the contact force, one
-step of dt per command (lockstep). Faults are injected on its answers with a seed: loss, reordering
-(an answer sent after the next one), duplication, corruption and delay. Its counters go to a JSON
-file when a session ends and when it stops.
+Model-paced (lockstep) it answers each COMMAND with a FORCE: the case's rig model (delay, N_com ramp,
+servo, load cell, offset, noise) moves the actuator and the case's pantograph model gives the
+contact force, one step of dt per command. Rig-paced it runs the same models from its own clock
+(drift, jitter): every tick it sends a SAMPLE and uses the newest ANSWER that has come back, counting
+the ticks that had to reuse an old one and timing every answer. Faults are injected on what it
+sends, with a seed: loss, reordering (a datagram sent after the next one), duplication, corruption
+and delay. A session belongs to the address and id that opened it (docs/udp-protocol.md). Its
+counters go to a JSON file when a session ends and when it stops.
 """
 from __future__ import annotations
 
@@ -13,6 +16,7 @@ import gc
 import json
 import math
 import random
+import select
 import signal
 import socket
 import time
@@ -25,7 +29,57 @@ from pantohil.models.pantograph.lumped import make_pantograph
 from pantohil.models.rig.chain import Rig
 from pantohil.models.storage import write_text_atomic
 
+from .rig_clock import Percentiles, RigClock
+
 RCVBUF_BYTES = 4 << 20
+WINDOW = 4096  # rig-paced: samples awaiting an answer that are remembered
+
+
+@dataclass(frozen=True)
+class RigPacing:
+    """How the emulator is paced: by the model (lockstep) or by its own clock, with drift and jitter."""
+
+    paced_by: str = "model"
+    drift_ppm: float = 0.0
+    jitter_us: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.paced_by not in ("model", "rig"):
+            raise ValueError(f"--paced-by: must be model or rig (got {self.paced_by!r})")
+        if not (math.isfinite(self.drift_ppm) and abs(self.drift_ppm) <= 10000):
+            raise ValueError(f"--drift-ppm: must be within +-10000 ppm (got {self.drift_ppm})")
+        if not (math.isfinite(self.jitter_us) and 0 <= self.jitter_us <= 1e5):
+            raise ValueError(f"--jitter-us: must be in [0, 100000] us (got {self.jitter_us})")
+
+    @property
+    def mode(self) -> int:
+        return proto.PACED_BY_RIG if self.paced_by == "rig" else proto.PACED_BY_MODEL
+
+
+@dataclass
+class PacedState:
+    """A rig-paced session's loop: the clock (from the model's ANSWER 0), the reference in use and the
+    bookkeeping of samples and answers (bounded: WINDOW samples awaiting an answer)."""
+
+    clock: RigClock | None = None
+    z_ref: float = 0.0
+    newest: int = 0
+    sent_ns: dict = field(default_factory=dict)
+    samples: int = 0
+    answered: int = 0
+    reused: int = 0
+    unanswered: int = 0
+    doubled: int = 0
+    answer_us: Percentiles = field(default_factory=Percentiles)
+    tick_late_us: Percentiles = field(default_factory=Percentiles)
+
+    def record(self) -> dict:
+        tail = sum(1 for seq in self.sent_ns if seq > self.newest)  # sent after the model's last answer
+        return {"samples": self.samples, "answered": self.answered, "reused": self.reused,
+                "unanswered": self.unanswered + len(self.sent_ns) - tail, "after_last_answer": tail,
+                "doubled": self.doubled, "answer_us": self.answer_us.summary(),
+                "tick_lateness_us": self.tick_late_us.summary()}
 
 
 @dataclass(frozen=True)
@@ -53,7 +107,11 @@ class EmulatorStats:
     sessions: int = 0
     commands: int = 0
     malformed: int = 0
+    old_version: int = 0
     unexpected: int = 0
+    foreign: int = 0
+    nonfinite: int = 0
+    bad_hello: int = 0
     answers: int = 0
     dropped: int = 0
     reordered: int = 0
@@ -64,13 +122,46 @@ class EmulatorStats:
     max_abs_acceleration_m_s2: float = 0.0
     last_height_m: float = 0.0
     last_commands_m: list = field(default_factory=list)
+    session_log: list = field(default_factory=list)
+
+
+@dataclass
+class Session:
+    """The session that owns the rig: only datagrams from its address with its id are taken."""
+
+    number: int
+    peer: tuple
+    id: int
+    mode: int
+    dt_s: float
+    last_heard: float
+    commands: int = 0
+    foreign: int = 0
+    nonfinite: int = 0
+    max_abs_height_m: float = 0.0
+    paced: PacedState | None = None
+
+    def record(self, end: str) -> dict:
+        rig_paced = self.paced.record() if self.paced is not None else {}
+        return {**rig_paced, "number": self.number, "peer": f"{self.peer[0]}:{self.peer[1]}", "id": f"{self.id:016x}",
+                "paced_by": "rig" if self.mode == proto.PACED_BY_RIG else "model", "dt_s": self.dt_s,
+                "commands": self.commands, "foreign": self.foreign, "nonfinite": self.nonfinite,
+                "max_abs_height_m": self.max_abs_height_m, "end": end}
+
+
+MIN_DT_S, MAX_DT_S = 1e-5, 1.0  # time steps a HELLO may ask for
 
 
 class RigEmulator:
     def __init__(self, case: Case, listen: tuple[str, int], faults: Faults = Faults(),
-                 stats_path: Path | None = None):
+                 stats_path: Path | None = None, key: bytes | None = None, session_timeout_s: float = 5.0,
+                 announce=None, pacing: RigPacing = RigPacing()):
         self.case = case
         self.faults = faults
+        self.pacing = pacing
+        self.key = key
+        self.session_timeout_s = session_timeout_s
+        self.announce = announce or (lambda line: None)
         self.stats = EmulatorStats()
         self.stats_path = Path(stats_path) if stats_path else None
         self._rng = random.Random(faults.seed)
@@ -81,25 +172,25 @@ class RigEmulator:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
         self.sock.bind(listen)
         self.address = self.sock.getsockname()
-        self._session = False
+        self.session: Session | None = None
         self._held = None
         self._stop = False
 
     def _reset(self, dt: float) -> None:
         c = self.case
-        self.dt = dt if dt > 0 else c.dt_s
+        self.dt = dt
         self.rig = Rig(c.rig, self.dt)
         self.pan = make_pantograph(c.pantograph, self.dt, c.reference_height_m())
         self.pan.settle(0.0)
         self._z = self._v = 0.0
         self._held = None
-        self._session = True
 
     def _record_command(self, z: float) -> None:
         s = self.stats
         v = (z - self._z) / self.dt
         a = (v - self._v) / self.dt if s.commands > 1 else 0.0
         s.max_abs_height_m = max(s.max_abs_height_m, abs(z))
+        self.session.max_abs_height_m = max(self.session.max_abs_height_m, abs(z))
         if s.commands > 0:
             s.max_abs_velocity_m_s = max(s.max_abs_velocity_m_s, abs(v))
             s.max_abs_acceleration_m_s2 = max(s.max_abs_acceleration_m_s2, abs(a))
@@ -110,6 +201,10 @@ class RigEmulator:
     def _send(self, data: bytes, peer) -> None:
         with contextlib.suppress(OSError):
             self.sock.sendto(data, peer)
+
+    def _status(self, peer, session: int, state: int, faults: int = 0, latency: int = 0, mode: int = 0) -> None:
+        self._send(proto.encode(proto.Message(proto.STATUS, 0, 0, a=float(latency), b=getattr(self, "dt", 0.0),
+                                              u=state, w=faults, session=session, c=float(mode)), self.key), peer)
 
     def _answer(self, reply: bytes, peer) -> None:
         f, r, s = self.faults, self._rng.random(), self.stats
@@ -147,37 +242,177 @@ class RigEmulator:
 
     def handle(self, data: bytes, peer) -> None:
         try:
-            msg = proto.decode(data)
-        except proto.Malformed:
+            msg = proto.decode(data, self.key)
+        except proto.Malformed as exc:
             self.stats.malformed += 1
+            if isinstance(exc, proto.OtherVersion):
+                self.stats.old_version += 1
+                if proto.is_v1_hello(data):  # an old model computer: tell it, in its own version, why not
+                    self._send(proto.v1_refusal(), peer)
             return
+        self._expire(time.monotonic())
+        s = self.session
         if msg.type == proto.HELLO:
+            self._hello(msg, peer)
+        elif msg.type not in (proto.COMMAND, proto.BYE, proto.ANSWER) or s is None:
+            self.stats.unexpected += 1  # a command outside a session, or a rig-side message
+        elif peer != s.peer or msg.session != s.id:
+            self.stats.foreign += 1  # not the session's master: never moves the actuator
+            s.foreign += 1
+        elif msg.type == proto.BYE:
+            s.last_heard = time.monotonic()
+            self._close("bye")
+        elif not proto.finite(msg):
+            self.stats.nonfinite += 1
+            s.nonfinite += 1
+        else:
+            s.last_heard = time.monotonic()
+            if msg.type == proto.COMMAND and s.paced is None:
+                self._command(msg, peer)
+            elif msg.type == proto.ANSWER and s.paced is not None:
+                self._take_answer(msg, s.paced)
+            else:
+                self.stats.unexpected += 1
+
+    def _hello(self, msg: proto.Message, peer) -> None:
+        """Open a session, repeat the answer to its own HELLO, or refuse (busy, bad values)."""
+        s = self.session
+        if s is not None and (peer != s.peer or msg.session != s.id):
+            self.stats.foreign += 1
+            s.foreign += 1
+            self._status(peer, msg.session, proto.RIG_BUSY, proto.FAULT_BUSY)
+            return
+        if not proto.finite(msg):
+            self.stats.nonfinite += 1
+            self._status(peer, msg.session, proto.RIG_FAULT, proto.FAULT_BAD_HELLO)
+            return
+        if not MIN_DT_S <= msg.a <= MAX_DT_S or msg.session == 0 or msg.u != self.pacing.mode:
+            self.stats.bad_hello += 1
+            faults = proto.FAULT_BAD_HELLO | (proto.FAULT_PACING if msg.u != self.pacing.mode else 0)
+            self._status(peer, msg.session, proto.RIG_FAULT, faults, mode=self.pacing.mode)
+            return
+        opening = s is None
+        if opening:
             self._reset(msg.a)
             self.stats.sessions += 1
-            latency = self.case.rig.latency_steps(self.dt)
-            self._send(proto.encode(proto.Message(proto.STATUS, 0, 0, a=float(latency), u=proto.RIG_READY)), peer)
-        elif msg.type == proto.COMMAND and self._session:
+            self.session = Session(self.stats.sessions, peer, msg.session, msg.u, msg.a, time.monotonic(),
+                                   paced=PacedState() if msg.u == proto.PACED_BY_RIG else None)
+        latency = self.case.rig.latency_steps(self.dt)
+        self._status(peer, msg.session, proto.RIG_READY, latency=latency, mode=msg.u)
+        if opening:
+            self.announce(f"session {self.session.number} opened by {peer[0]}:{peer[1]} "
+                          f"({'rig' if msg.u == proto.PACED_BY_RIG else 'model'}-paced, dt {msg.a:g} s)")
+
+    def _command(self, msg: proto.Message, peer) -> None:
+        """Model-paced (lockstep): one step of the rig and the pantograph per COMMAND, answered by a FORCE."""
+        self.stats.commands += 1
+        self.session.commands += 1
+        self._record_command(msg.a)
+        z_act = self.rig.height(msg.a)
+        f = self.rig.force(self.pan.step(z_act))
+        self.stats.answers += 1
+        self._answer(proto.encode(proto.Message(proto.FORCE, msg.seq, msg.t_ns, a=f, b=z_act, u=proto.RIG_RUNNING,
+                                                session=msg.session), self.key), peer)
+
+    def _take_answer(self, msg: proto.Message, p: PacedState) -> None:
+        """Rig-paced: ANSWER 0 starts the loop; an answer to a sample is timed and, if it is the
+        newest, becomes the reference of the next tick."""
+        now = time.perf_counter_ns()
+        if p.clock is None:
+            if msg.seq == 0:
+                pc = self.pacing
+                p.clock = RigClock(self.dt, now, pc.drift_ppm, pc.jitter_us, pc.seed)
+                p.z_ref = msg.a
+            return
+        sent = p.sent_ns.pop(msg.seq, None)
+        if sent is None:
+            if 0 < msg.seq <= p.clock.tick:
+                p.doubled += 1  # already answered (or answered after WINDOW ticks)
+            else:
+                self.stats.unexpected += 1  # an answer to a sample not sent
+            return
+        p.answered += 1
+        p.answer_us.add((now - sent) / 1e3)
+        if msg.seq > p.newest:
+            p.newest = msg.seq
+            p.z_ref = msg.a
             self.stats.commands += 1
+            self.session.commands += 1
             self._record_command(msg.a)
-            z_act = self.rig.height(msg.a)
-            f = self.rig.force(self.pan.step(z_act))
-            self.stats.answers += 1
-            self._answer(proto.encode(proto.Message(proto.FORCE, msg.seq, msg.t_ns, a=f, b=z_act,
-                                                    u=proto.RIG_RUNNING)), peer)
-        elif msg.type == proto.BYE:
-            if self._held is not None:
-                self._send(self._held, peer)
-                self._held = None
-            self._session = False
-            self.write_stats()
-        else:
-            self.stats.unexpected += 1  # a command outside a session, or a rig-side message
+
+    def _tick(self, p: PacedState) -> None:
+        """One tick of the rig's main loop: the newest answer moves the actuator, the force is
+        measured and sent as a SAMPLE."""
+        now = time.perf_counter_ns()
+        p.tick_late_us.add(max(now - p.clock.due_ns, 0) / 1e3)
+        k = p.clock.advance()
+        if k >= 2 and p.newest < k - 1:
+            p.reused += 1  # the answer to the previous sample has not come: the old reference again
+        z_act = self.rig.height(p.z_ref)
+        f = self.rig.force(self.pan.step(z_act))
+        sample = proto.Message(proto.SAMPLE, k, p.clock.rig_time_ns(k), a=f, b=z_act, u=proto.RIG_RUNNING,
+                               w=p.reused, session=self.session.id)
+        p.sent_ns[k] = time.perf_counter_ns()
+        self._answer(proto.encode(sample, self.key), self.session.peer)
+        p.samples += 1
+        self.stats.answers += 1
+        if len(p.sent_ns) > WINDOW:
+            del p.sent_ns[next(iter(p.sent_ns))]
+            p.unanswered += 1
+
+    def _close(self, end: str) -> None:
+        s = self.session
+        if self._held is not None:
+            self._send(self._held, s.peer)
+            self._held = None
+        self.stats.session_log.append(s.record(end))
+        rec = self.stats.session_log[-1]
+        paced = (f", {rec['samples']} samples, {rec['answered']} answered, {rec['reused']} reused, answer p50 "
+                 f"{rec['answer_us']['p50']:.0f} us p99 {rec['answer_us']['p99']:.0f} us max "
+                 f"{rec['answer_us']['max']:.0f} us") if s.paced is not None else ""
+        self.announce(f"session {s.number} closed ({end}): {s.commands} commands{paced}, {s.foreign} foreign "
+                      f"datagrams refused")
+        self.session = None
+        self.write_stats()
+
+    def _expire(self, now: float) -> None:
+        """A session whose master has been silent for session_timeout_s ends; the actuator holds."""
+        if self.session is not None and now - self.session.last_heard > self.session_timeout_s:
+            self._close(f"expired: no datagram from its master for {self.session_timeout_s:g} s")
 
     def write_stats(self) -> None:
         if self.stats_path is None:
             return
         stats = {**asdict(self.stats), "faults": asdict(self.faults), "listen": f"{self.address[0]}:{self.address[1]}"}
         write_text_atomic(self.stats_path, json.dumps(stats, indent=1) + "\n")
+
+    def _serve_once(self) -> None:
+        """Tick if a rig-paced loop is due, then handle every datagram that is waiting; else wait for
+        one until the next tick (or 0.2 s). select() waits to the microsecond (a socket timeout rounds
+        up to whole milliseconds)."""
+        s = self.session
+        p = s.paced if s is not None else None
+        timeout = 0.2
+        if p is not None and p.clock is not None:
+            wait_ns = p.clock.due_ns - time.perf_counter_ns()
+            if wait_ns <= 0:
+                self._tick(p)
+                if p.clock.tick % 256 == 0:
+                    self._expire(time.monotonic())
+                timeout = 0.0
+            else:
+                timeout = min(wait_ns / 1e9, 0.2)
+        readable, _, _ = select.select([self.sock], [], [], timeout)
+        if not readable:
+            if timeout > 0:
+                self._expire(time.monotonic())
+            return
+        for _ in range(64):  # then back to the clock: a flood of datagrams never stops the ticks
+            try:
+                data, peer = self.sock.recvfrom(2048)
+            except OSError:  # nothing more waiting (BlockingIOError), or an ICMP error on the socket
+                return
+            self.handle(data, peer)
 
     def serve(self, max_seconds: float | None = None) -> None:
         """Answer datagrams until SIGTERM/SIGINT (or max_seconds); always writes the stats."""
@@ -187,19 +422,15 @@ class RigEmulator:
         signal.signal(signal.SIGTERM, stop)
         signal.signal(signal.SIGINT, stop)
         end = math.inf if max_seconds is None else time.monotonic() + max_seconds
-        self.sock.settimeout(0.2)
+        self.sock.setblocking(False)
         gc.collect()
         gc.disable()  # a collection pause would make answers late; the loop makes little garbage
         try:
             while not self._stop and time.monotonic() < end:
-                try:
-                    data, peer = self.sock.recvfrom(2048)
-                except TimeoutError:
-                    continue
-                except OSError:
-                    continue
-                self.handle(data, peer)
+                self._serve_once()
         finally:
             gc.enable()
+            if self.session is not None:
+                self._close("emulator stopped")
             self.write_stats()
             self.sock.close()

@@ -49,7 +49,7 @@ def group_block(master, groups: dict, topic: str, start: int, stop: int) -> np.n
     cols = []
     for name in groups[topic]:
         if name in master.input_names.get(fmu, []):
-            cols.append(master.record_in[fmu][start:stop, master.input_names[fmu].index(name)])
+            cols.append(master.record_in[fmu][master.rows(start, stop), master.input_names[fmu].index(name)])
         else:
             cols.append(master.column(fmu, name, start, stop))
     return np.column_stack(cols)

@@ -1,11 +1,15 @@
 """The hardware path: adapter FMU <-UDP-> rig emulator on loopback, real time, faults,
 fuzzing, link loss and actuator limits."""
 import json
+import math
+import struct
+import zlib
 import random
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -37,6 +41,27 @@ class Emulator:
         assert "listening on" in line, line + self.proc.stderr.read()
         self.port = int(line.split("listening on ")[1].split()[0].rsplit(":", 1)[1])
         self.address = f"127.0.0.1:{self.port}"
+        self.lines: list[str] = []
+        self._new_line = threading.Condition()
+        threading.Thread(target=self._read_lines, daemon=True).start()
+
+    def _read_lines(self):
+        for line in self.proc.stdout:
+            with self._new_line:
+                self.lines.append(line)
+                self._new_line.notify_all()
+        with self._new_line:
+            self.lines.append("")  # end of output
+            self._new_line.notify_all()
+
+    def wait_for(self, text: str, timeout: float = 120.0) -> str:
+        """The first line of the emulator's output that contains `text` (waits for it)."""
+        with self._new_line:
+            found = self._new_line.wait_for(lambda: any(text in ln for ln in self.lines) or "" in self.lines,
+                                            timeout)
+            hits = [ln for ln in self.lines if text in ln]
+        assert found and hits, f"no line with {text!r} in {self.lines}"
+        return hits[0]
 
     def stop(self) -> dict:
         if self.proc.poll() is None:
@@ -123,18 +148,19 @@ def test_fuzzing_the_emulator(tmp_path):
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.settimeout(2.0)
     peer = ("127.0.0.1", emu.port)
-    valid = proto.encode(proto.Message(proto.COMMAND, 1, 0, a=0.01))
-    sock.sendto(proto.encode(proto.Message(proto.HELLO, 0, 0, a=0.001)), peer)
-    assert proto.decode(sock.recvfrom(64)[0]).type == proto.STATUS
+    sid = proto.new_session_id()
+    valid = proto.encode(proto.Message(proto.COMMAND, 1, 0, a=0.01, session=sid))
+    sock.sendto(proto.encode(proto.Message(proto.HELLO, 0, 0, a=0.001, session=sid)), peer)
+    assert proto.decode(sock.recvfrom(2048)[0]).type == proto.STATUS
     answers = 0
     for k in range(1, 1001):
         for _ in range(10):
             sock.sendto(_junk(rng, valid), peer)
-        sock.sendto(proto.encode(proto.Message(proto.COMMAND, k, k * 1_000_000, a=0.01)), peer)
-        msg = proto.decode(sock.recvfrom(64)[0])
+        sock.sendto(proto.encode(proto.Message(proto.COMMAND, k, k * 1_000_000, a=0.01, session=sid)), peer)
+        msg = proto.decode(sock.recvfrom(2048)[0])
         answers += msg.type == proto.FORCE and msg.seq == k
-    sock.sendto(proto.encode(proto.Message(proto.BYE, 1001, 0)), peer)
-    time.sleep(0.3)
+    sock.sendto(proto.encode(proto.Message(proto.BYE, 1001, 0, session=sid)), peer)
+    emu.wait_for("session 1 closed")
     stats = emu.stop()
     assert stats["malformed"] == 10000
     assert answers == 1000 and stats["commands"] == 1000
@@ -150,7 +176,8 @@ def test_fuzzing_the_adapter(tmp_path):
 
     emu = Emulator(tmp_path)
     port = free_port()
-    case = load_case(None, [f"link.local_port={port}", "link.receive_timeout_s=0.01"])
+    # a receive timeout far above any stall of a loaded machine: every answer is waited for
+    case = load_case(None, [f"link.local_port={port}", "link.receive_timeout_s=1.0"])
     fmu = build_case_fmus(case, tmp_path / "fmus", 7, ("adapter",), ("127.0.0.1", emu.port))["adapter"]
     inst = FmuInstance("adapter", fmu)
     try:
@@ -158,7 +185,7 @@ def test_fuzzing_the_adapter(tmp_path):
         assert inst.get_values(["link_state"])["link_state"] == 0
         rng = random.Random(9)
         fuzz = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        valid = proto.encode(proto.Message(proto.FORCE, 10**6, 0, a=1.0))
+        valid = proto.encode(proto.Message(proto.FORCE, 10**6, 0, a=1.0, session=12345))
         steps = 1000
         for k in range(steps + 20):  # 20 more steps drain what is still queued
             if k < steps:
@@ -195,7 +222,8 @@ def test_link_loss_ends_the_run_with_exit_3_and_a_readable_log(tmp_path):
     assert summary["status"] == "link_lost" and not summary["converged"]
     adapter = mcap_rows(out / "run.mcap", "/adapter")  # readable up to the stop
     forces = [row["measured_force"] for row in adapter]
-    trailing = len(forces) - max(i for i, f in enumerate(forces) if f is not None) - 1
+    # the first step (pipelined) awaits nothing: it stands for the last answer if none came before the kill
+    trailing = len(forces) - max([0] + [i for i, f in enumerate(forces) if f is not None]) - 1
     assert trailing == 101  # stopped right after the tolerated 100 missing answers
     held = [row["command_sent"] for row in adapter if row["link_state"] == 2]
     assert held and len(set(held)) == 1  # the last position is held
@@ -220,3 +248,251 @@ def test_commands_never_exceed_the_actuator_limits(tmp_path):
     assert stats["max_abs_height_m"] <= 0.03 + 1e-12
     assert stats["max_abs_velocity_m_s"] <= 0.02 * (1 + 1e-6)
     assert stats["max_abs_acceleration_m_s2"] <= 2.0 * (1 + 1e-6)
+
+
+def _hardware_run(emu: Emulator, out: Path) -> subprocess.CompletedProcess:
+    # a receive timeout far above any scheduling stall, so that every answer is used and the run is
+    # deterministic: two runs against the lockstep emulator give the same span to the last bit
+    return pantohil("run", "--hardware", emu.address, "--out", str(out), "--quiet",
+                    "--set", "link.receive_timeout_s=1.0")
+
+
+class Intruder:
+    """A second client on loopback that sends valid HELLO, COMMAND and BYE datagrams, with its own
+    session id and with guessed ones, until told to stop."""
+
+    def __init__(self, port: int):
+        self.peer = ("127.0.0.1", port)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sent = 0
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        rng = random.Random(17)
+        own = proto.new_session_id()
+        k = 0
+        while not self.stop.is_set():
+            k += 1
+            guessed = rng.getrandbits(64)
+            for m in (proto.Message(proto.HELLO, 0, 0, a=0.001, session=own),
+                      proto.Message(proto.COMMAND, k, k * 1_000_000, a=0.11, session=own),
+                      proto.Message(proto.COMMAND, k, k * 1_000_000, a=-0.11, session=guessed),
+                      proto.Message(proto.HELLO, 0, 0, a=0.001, session=guessed),
+                      proto.Message(proto.BYE, k, 0, session=guessed),
+                      proto.Message(proto.BYE, k, 0, session=own)):
+                self.sock.sendto(proto.encode(m), self.peer)
+                self.sent += 1
+            time.sleep(0.001)  # a steady stream, not a flood: the point is who may move the actuator
+
+
+@pytest.mark.slow
+def test_a_second_client_cannot_move_or_reset_the_rig(tmp_path):
+    # issue 15 acceptance 2: datagrams of another client during a hardware session are refused and
+    # counted, the actuator never moves for them, and the run's span equals an undisturbed run's
+    emu = Emulator(tmp_path)
+    try:
+        undisturbed = _hardware_run(emu, tmp_path / "undisturbed")
+        emu.wait_for("session 1 closed")
+        intruder = Intruder(emu.port)
+        result = {}
+        run = threading.Thread(target=lambda: result.update(proc=_hardware_run(emu, tmp_path / "disturbed")))
+        run.start()
+        emu.wait_for("session 2 opened")
+        intruder.thread.start()
+        emu.wait_for("session 2 closed")
+        intruder.stop.set()
+        intruder.thread.join()
+        run.join()
+    finally:
+        stats = emu.stop()
+    assert undisturbed.returncode == 0 and result["proc"].returncode == 0, result["proc"].stderr
+    quiet, disturbed = stats["session_log"][0], stats["session_log"][1]
+    assert quiet["end"] == disturbed["end"] == "bye"  # the intruder's BYEs ended nothing
+    assert disturbed["foreign"] > 100 and quiet["foreign"] == 0
+    assert disturbed["foreign"] <= intruder.sent and stats["foreign"] >= disturbed["foreign"]
+    summary_q, span_q = load_run(tmp_path / "undisturbed")
+    summary_d, span_d = load_run(tmp_path / "disturbed")
+    assert disturbed["commands"] == summary_d["link"]["sent"] and quiet["commands"] == summary_q["link"]["sent"]
+    # the actuator went exactly where the session's own master sent it, never to the intruder's +-0.11 m
+    assert disturbed["max_abs_height_m"] == quiet["max_abs_height_m"] < 0.1
+    assert summary_d["spans"] == summary_q["spans"] and np.array_equal(span_d, span_q)
+    assert summary_d["link"]["lost"] == 0 and summary_d["link"]["foreign"] == 0
+
+
+def _ask(sock: socket.socket, peer, m: proto.Message) -> proto.Message:
+    sock.sendto(proto.encode(m), peer)
+    return proto.decode(sock.recvfrom(2048)[0])
+
+
+def test_the_emulator_refuses_bad_values_and_other_versions(tmp_path):
+    emu = Emulator(tmp_path)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.settimeout(30.0)
+    peer = ("127.0.0.1", emu.port)
+    try:
+        for dt in (math.nan, math.inf, -1.0, 0.0, 10.0):
+            status = _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=dt, session=5))
+            assert status.type == proto.STATUS and status.u == proto.RIG_FAULT and status.w == proto.FAULT_BAD_HELLO
+        status = _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=0.001, session=0))  # no session id
+        assert status.w == proto.FAULT_BAD_HELLO
+        v1 = struct.Struct("<IBBHIQddII").pack(proto.MAGIC, 1, proto.HELLO, 0, 0, 0, 0.001, 0.0, 0, 0)
+        sock.sendto(v1 + struct.pack("<I", zlib.crc32(v1)), peer)
+        assert sock.recvfrom(2048)[0] == proto.v1_refusal()
+        sid = proto.new_session_id()
+        assert _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=0.001, session=sid)).w == 0
+        for z in (math.nan, math.inf, -math.inf):
+            sock.sendto(proto.encode(proto.Message(proto.COMMAND, 1, 0, a=z, session=sid)), peer)
+        sock.sendto(proto.encode(proto.Message(proto.COMMAND, 2, 0, a=0.01, b=math.nan, session=sid)), peer)
+        answer = _ask(sock, peer, proto.Message(proto.COMMAND, 3, 0, a=0.02, session=sid))
+        assert answer.type == proto.FORCE and answer.seq == 3 and answer.session == sid  # the first one taken
+        sock.sendto(proto.encode(proto.Message(proto.BYE, 4, 0, session=sid)), peer)
+        emu.wait_for("session 1 closed")
+    finally:
+        stats = emu.stop()
+    assert stats["nonfinite"] == 2 + 4 and stats["bad_hello"] == 4 and stats["old_version"] == 1
+    assert stats["commands"] == 1 and stats["max_abs_height_m"] == 0.02 and stats["sessions"] == 1
+
+
+def test_a_silent_master_loses_its_session(tmp_path):
+    emu = Emulator(tmp_path, "--session-timeout-s", "0.5")
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.settimeout(30.0)
+    peer = ("127.0.0.1", emu.port)
+    try:
+        assert _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=0.001, session=11)).w == 0
+        assert _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=0.001, session=12)).u == proto.RIG_BUSY
+        emu.wait_for("session 1 closed (expired")
+        assert _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=0.001, session=12)).w == 0
+    finally:
+        stats = emu.stop()
+    assert stats["foreign"] == 1 and stats["sessions"] == 2
+
+
+class FakeRig:
+    """The test plays the rig controller on a real socket, answering COMMANDs with chosen forces."""
+
+    def __init__(self, force: float, stranger: bool):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(30.0)
+        self.port = self.sock.getsockname()[1]
+        self.other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.force, self.stranger = force, stranger
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _serve(self):
+        while True:
+            try:
+                data, peer = self.sock.recvfrom(2048)
+            except OSError:
+                return
+            m = proto.decode(data)
+            if m.type == proto.HELLO:
+                reply = proto.Message(proto.STATUS, 0, 0, session=m.session)
+            elif m.type == proto.COMMAND:
+                if self.stranger:  # a valid answer, from another address, then a guessed session's
+                    self.other.sendto(proto.encode(proto.Message(proto.FORCE, m.seq, m.t_ns, a=5.0,
+                                                                 session=m.session)), peer)
+                    self.sock.sendto(proto.encode(proto.Message(proto.FORCE, m.seq, m.t_ns, a=5.0,
+                                                                session=m.session ^ 1)), peer)
+                reply = proto.Message(proto.FORCE, m.seq, m.t_ns, a=self.force, session=m.session)
+            else:
+                continue
+            self.sock.sendto(proto.encode(reply), peer)
+
+
+@pytest.mark.parametrize("force,stranger", [(math.nan, False), (math.inf, False), (100.0, True)])
+def test_the_adapter_takes_finite_answers_of_its_own_session_only(tmp_path, force, stranger):
+    from pantohil.builder.build_fmus import build_case_fmus
+    from pantohil.models.case import load_case
+    from pantohil.orchestrator.fmu_runtime import FmuInstance
+
+    rig = FakeRig(force, stranger)
+    # a refused answer leaves the step waiting for its timeout: short for those, long for the others
+    timeout = 1.0 if stranger else 0.02
+    case = load_case(None, [f"link.receive_timeout_s={timeout}", "link.tolerated_losses=1000"])
+    fmu = build_case_fmus(case, tmp_path / "fmus", 7, ("adapter",), ("127.0.0.1", rig.port))["adapter"]
+    inst = FmuInstance("adapter", fmu)
+    steps = 200 if stranger else 50
+    try:
+        inst.setup(0.0, {})
+        forces = []
+        for k in range(steps):
+            inst.do_step(k * 0.001, 0.001)
+            forces.append(inst.get_values(["measured_force"])["measured_force"])
+        out = inst.get_values(["received", "foreign", "nonfinite", "sent"])
+    finally:
+        inst.close()
+    if stranger:
+        assert out["foreign"] == 2 * (steps - 1) and out["received"] == steps - 1
+        assert all(f == 100.0 for f in forces[1:])
+    else:
+        assert steps - 1 <= out["nonfinite"] <= steps and out["received"] == 0 and out["foreign"] == 0
+        assert all(math.isnan(f) for f in forces)
+
+
+def _rig_paced_run(emu: Emulator, out: Path, *extra: str) -> subprocess.CompletedProcess:
+    # three spans of rig time (about 2.8 s at dt = 1 ms), a fixed-length test
+    return pantohil("run", "--hardware", emu.address, "--paced-by", "rig", "--out", str(out), "--quiet",
+                    "--set", "run.max_spans=3", "--set", "run.duration_s=2.8", *extra)
+
+
+@pytest.mark.realtime
+@pytest.mark.parametrize("master", ["fmpy", "libcosim"])
+def test_a_rig_paced_run_consumes_and_answers_every_rig_sample_once(tmp_path, master):
+    # the emulator's own clock runs 100 ppm fast with 50 us of jitter; the master has no pacer
+    emu = Emulator(tmp_path, "--paced-by", "rig", "--drift-ppm", "100", "--jitter-us", "50")
+    out = tmp_path / "paced"
+    try:
+        proc = _rig_paced_run(emu, out, "--master", master)
+        emu.wait_for("session 1 closed")
+    finally:
+        stats = emu.stop()
+    assert proc.returncode in (0, 1), proc.stdout + proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    link, rig = summary["link"], stats["session_log"][0]
+    steps = summary["spans"] * summary["samples_per_span"]
+    assert summary["spans"] == 3 and link["paced_by"] == "rig"
+    # one sample per step, each answered once: none lost, none doubled, none left unanswered
+    assert link["samples"] == link["answered"] == steps and link["lost"] == 0 and link["duplicated"] == 0
+    assert rig["answered"] == steps and rig["unanswered"] == 0 and rig["doubled"] == 0
+    assert rig["samples"] == steps + rig["after_last_answer"]
+    assert link["reused"] <= rig["reused"] <= rig["samples"]  # the adapter reports the rig's count
+    a = link["answer_us"]
+    assert 0 < a["p50"] <= a["p99"] <= a["max"]
+    adapter = mcap_rows(out / "run.mcap", "/adapter")  # both sides, per sample
+    assert len(adapter) == steps
+    assert [row["samples"] for row in adapter] == list(range(1, steps + 1))
+    assert all(row["answer_time"] is not None and row["answer_time"] > 0 for row in adapter)
+    assert all(row["measured_force"] is not None for row in adapter)
+
+
+def test_a_rig_that_runs_another_pacing_refuses_the_session(tmp_path):
+    emu = Emulator(tmp_path, "--paced-by", "rig")
+    out = tmp_path / "refused"
+    try:
+        proc = pantohil("run", "--hardware", emu.address, "--out", str(out), "--quiet")  # model-paced
+    finally:
+        stats = emu.stop()
+    assert proc.returncode == 3, proc.stdout + proc.stderr
+    assert "does not run that pacing" in proc.stderr.strip().splitlines()[-1]
+    assert stats["sessions"] == 0 and stats["bad_hello"] >= 1
+
+
+@pytest.mark.realtime
+def test_a_rig_that_stops_sending_samples_is_a_link_fault(tmp_path):
+    emu = Emulator(tmp_path, "--paced-by", "rig")
+    out = tmp_path / "stopped"
+    run = subprocess.Popen([sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--hardware", emu.address,
+                            "--paced-by", "rig", "--out", str(out), "--quiet", "--set", "link.sample_timeout_s=0.2"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    emu.wait_for("session 1 opened")
+    emu.proc.kill()
+    stdout, stderr = run.communicate(timeout=300)
+    assert run.returncode == 3, stdout + stderr
+    assert "no sample from the rig for link.sample_timeout_s = 0.2 s" in stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "link_lost"
+    held = [row["command_sent"] for row in mcap_rows(out / "run.mcap", "/adapter") if row["link_state"] == 2]
+    assert held and len(set(held)) == 1

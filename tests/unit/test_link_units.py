@@ -13,9 +13,9 @@ from pantohil.models.rig.actuator import ActuatorLimits, Limiter
 
 def test_round_trip_every_type():
     for t in proto.TYPE_NAMES:
-        m = proto.Message(t, 123456, 987654321, a=1.25, b=-3.5, u=2, w=7)
+        m = proto.Message(t, 123456, 987654321, a=1.25, b=-3.5, u=2, w=7, session=2**64 - 3, c=0.5)
         data = proto.encode(m)
-        assert len(data) == proto.SIZE == 48
+        assert len(data) == proto.SIZE == 64
         assert proto.decode(data) == m
 
 
@@ -36,13 +36,54 @@ def _with_crc(body: bytes) -> bytes:
 
 
 def test_bad_magic_version_and_type_with_a_valid_crc():
-    fmt = struct.Struct("<IBBHIQddII")
+    fmt = struct.Struct("<IBBHQIQdddII")
     with pytest.raises(proto.Malformed, match="magic"):
-        proto.decode(_with_crc(fmt.pack(0xDEADBEEF, 1, 2, 0, 1, 0, 0.0, 0.0, 0, 0)))
-    with pytest.raises(proto.Malformed, match="version"):
-        proto.decode(_with_crc(fmt.pack(proto.MAGIC, 9, 2, 0, 1, 0, 0.0, 0.0, 0, 0)))
+        proto.decode(_with_crc(fmt.pack(0xDEADBEEF, 2, 2, 0, 5, 1, 0, 0.0, 0.0, 0.0, 0, 0)))
+    with pytest.raises(proto.OtherVersion, match="version 9"):
+        proto.decode(_with_crc(fmt.pack(proto.MAGIC, 9, 2, 0, 5, 1, 0, 0.0, 0.0, 0.0, 0, 0)))
     with pytest.raises(proto.Malformed, match="type"):
-        proto.decode(_with_crc(fmt.pack(proto.MAGIC, 1, 99, 0, 1, 0, 0.0, 0.0, 0, 0)))
+        proto.decode(_with_crc(fmt.pack(proto.MAGIC, 2, 99, 0, 5, 1, 0, 0.0, 0.0, 0.0, 0, 0)))
+
+
+def test_a_version_1_hello_is_recognised_and_refused_in_version_1():
+    v1 = struct.Struct("<IBBHIQddII")
+    hello = _with_crc(v1.pack(proto.MAGIC, 1, proto.HELLO, 0, 0, 0, 0.001, 0.0, 0, 0))
+    assert proto.is_v1_hello(hello)
+    with pytest.raises(proto.OtherVersion, match="version 1"):
+        proto.decode(hello)
+    refusal = proto.v1_refusal()
+    assert len(refusal) == 48 and zlib.crc32(refusal[:-4]) == struct.unpack("<I", refusal[-4:])[0]
+    magic, version, typ, _, _, _, a, _, state, faults = v1.unpack(refusal[:-4])
+    assert (magic, version, typ, a, state, faults) == (proto.MAGIC, 1, proto.STATUS, 2.0, proto.RIG_FAULT,
+                                                       proto.FAULT_VERSION)
+    assert not proto.is_v1_hello(proto.encode(proto.Message(proto.HELLO, 0, 0, a=0.001, session=7)))
+
+
+def test_authenticated_datagrams_need_the_key():
+    key, other = b"k" * 32, b"j" * 32
+    m = proto.Message(proto.COMMAND, 9, 10, a=0.01, session=42)
+    signed = proto.encode(m, key)
+    assert len(signed) == proto.SIZE_AUTHENTICATED == 92
+    assert proto.decode(signed, key) == m
+    for data, k in ((signed, other), (signed, None), (proto.encode(m), key)):
+        with pytest.raises(proto.Malformed):
+            proto.decode(data, k)
+    tampered = bytearray(signed)
+    tampered[20] ^= 1  # the height
+    with pytest.raises(proto.Malformed, match="HMAC"):
+        proto.decode(bytes(tampered), key)
+
+
+def test_session_ids_are_random_and_non_zero():
+    ids = {proto.new_session_id() for _ in range(1000)}
+    assert len(ids) == 1000 and 0 not in ids
+
+
+def test_finite_checks_every_payload_value():
+    assert proto.finite(proto.Message(proto.COMMAND, 1, 0, a=0.1, b=0.2, c=0.3))
+    for bad in (math.nan, math.inf, -math.inf):
+        for field in ("a", "b", "c"):
+            assert not proto.finite(proto.Message(proto.COMMAND, 1, 0, **{field: bad}))
 
 
 def test_parse_endpoint():
