@@ -54,7 +54,7 @@ class Emulator:
             self.lines.append("")  # end of output
             self._new_line.notify_all()
 
-    def wait_for(self, text: str, timeout: float = 120.0) -> str:
+    def wait_for(self, text: str, timeout: float = 900.0) -> str:
         """The first line of the emulator's output that contains `text` (waits for it)."""
         with self._new_line:
             found = self._new_line.wait_for(lambda: any(text in ln for ln in self.lines) or "" in self.lines,
