@@ -17,11 +17,13 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pythonfmu
 
 from pantohil.fmus import fmu_support
 from pantohil.models.case import Case
 from pantohil.models.catenary.profile import write_profile_csv
+from pantohil.models.rig.rig_file import rig_to_toml
 from pantohil.models.storage import atomic_path, cache_root
 
 from . import loader
@@ -46,9 +48,10 @@ def fmu_parameters(case: Case, delay_steps: int,
                 "pantograph.masses_kg": pan.masses_kg, "pantograph.stiffnesses_N_m": pan.stiffnesses_N_m,
                 "pantograph.dampings_Ns_m": pan.dampings_Ns_m}
     derived = {
-        "catenary": {"speed": case.speed_m_s, "time_step": case.dt_s, "samples_per_span": case.samples_per_span},
+        "catenary": {"speed": case.speed_m_s, "time_step": case.dt_s, "samples_per_span": case.samples_per_span,
+                     "rig_compensation": int(case.compensates_rig_response)},
         "pantograph": {"n_masses": pan.n, "reference_height": case.reference_height_m(), "time_step": case.dt_s},
-        "rig": {"time_step": case.dt_s},
+        "rig": {"time_step": case.dt_s, "rig_chain": int(case.rig_spec is not None)},
         "adapter": {"rig_host": rig_address[0], "rig_port": rig_address[1], "time_step": case.dt_s,
                     "local_host": case.values["link"]["local_host"], "key_file": case.values["link"]["key_file"]},
     }
@@ -72,9 +75,18 @@ def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
     files.append(stage / fmu_support.PARAMETERS_FILE)
     (stage / fmu_support.REQUIREMENTS_FILE).write_text("\n".join(fmu_support.REQUIREMENTS) + "\n")
     files.append(stage / fmu_support.REQUIREMENTS_FILE)
+    if name == "rig" and case.rig_spec is not None:
+        (stage / "rig.toml").write_text(rig_to_toml(case.rig_spec, f"rig of case {case.name}"))
+        files.append(stage / "rig.toml")
     if name == "catenary":
         write_profile_csv(stage / "profile.csv", case.profile)
         files.append(stage / "profile.csv")
+        if case.compensates_rig_response:
+            gz, gf = case.rig_response()
+            table = np.column_stack([np.arange(len(gz)), gz.real, gz.imag, gf.real, gf.imag])
+            np.savetxt(stage / "rig_response.csv", table, delimiter=",", comments="", fmt="%.17g",
+                       header="harmonic,height_re,height_im,force_re,force_im")
+            files.append(stage / "rig_response.csv")
         if case.model == "pfem":
             op = case_operators(case)
             shutil.copy2(op.path, stage / "operators.npz")

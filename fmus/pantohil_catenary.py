@@ -13,10 +13,12 @@ from pantohil.models.hil.loop import UPDATES, HilSettings, PeriodicHil
 from pantohil.models.catenary.pfem.operator_file import load_operators
 from pantohil.models.hil.droppers import PfemHil
 from pantohil.models.catenary.profile import read_profile_csv
-from pantohil.models.catenary.receptance import asm_operator, harmonic_count, reduce_harmonics
+from pantohil.models.catenary.receptance import CirculantOperator, asm_operator, harmonic_count, reduce_harmonics
+from pantohil.models.rig.compensation import HarmonicCompensation
 
 PROFILE_FILE = "profile.csv"
 OPERATOR_FILE = "operators.npz"
+RIG_RESPONSE_FILE = "rig_response.csv"
 MAX_DROPPERS = 12
 ASM_FIELDS = ("tension_N", "density_kg_m", "support_stiffness_N_m2", "alpha_1_s", "beta_s")  # case keys = fields
 
@@ -34,6 +36,8 @@ VARIABLES = [
         0.1,
     ),
     Var("samples_per_span", "integer", "parameter", "1", "Samples per span N = L / (V dt)", 936, 2),
+    Var("rig_compensation", "integer", "parameter", "1", "0: delay advance D only; 1: also the rig's response at the kept "
+        "harmonics from resources/rig_response.csv (command = G_z^-1 z, force = G_f^-1 f_meas)", 0, 0, 1),
     Var(
         "contact_force",
         "real",
@@ -52,7 +56,8 @@ VARIABLES = [
         "real",
         "output",
         "N",
-        "Force in use at sample_index: the measured one, or the previous span's if it was not measured (NaN input)",
+        "Force in use at sample_index: the measured one (the true-force estimate G_f^-1 f_meas with "
+        "rig_compensation = 1), or the previous span's if it was not measured (NaN input)",
         0.0,
     ),
     Var("harmonics", "integer", "output", "1", "Harmonics kept N_h (0..N_h-1)", 0),
@@ -97,6 +102,7 @@ class PantohilCatenary(PantohilSlave):
         self.harmonics = harmonic_count(self.max_frequency_hz, n, self.time_step)
         settings = HilSettings(update=UPDATES[self.hil_update], relaxation=self.relaxation,
                                delay_steps=self.delay_steps, ramp_steps=self.ramp_steps)
+        comp = self._compensation(n) if self.rig_compensation == 1 else None
         if self.catenary_model == 1:
             ops = load_operators(Path(self.resources) / OPERATOR_FILE)
             s = ops.settings
@@ -110,16 +116,25 @@ class PantohilCatenary(PantohilSlave):
                     f"the PFEM block has {ops.n_droppers} droppers; this FMU reports at most {MAX_DROPPERS}"
                 )
             self._z0 = ops.z0
-            self._hil = PfemHil(ops, settings, self.dropper_relaxation, bool(self.droppers))
+            self._hil = PfemHil(ops, settings, self.dropper_relaxation, bool(self.droppers), comp)
         else:
             cat = AsmParameters(**{f: getattr(self, f) for f in ASM_FIELDS})
             x = np.arange(n) * self.speed * self.time_step
             self._z0 = read_profile_csv(Path(self.resources) / PROFILE_FILE, self.span_m).heights(x)
             op = asm_operator(cat, self.speed, n, self.time_step, self.harmonics)
-            self._hil = PeriodicHil(op, reduce_harmonics(self._z0, self.harmonics), settings)
+            if comp is not None:
+                op = CirculantOperator(comp.compensate_kernel(op.kernel))
+            self._hil = PeriodicHil(op, reduce_harmonics(self._z0, self.harmonics), settings, comp)
         self._pfem = self.catenary_model == 1
         self._label = 0
-        self.height_command = 0.0 if self.ramp_steps > 0 else self._hil.current_height(self.delay_steps % n)
+        self.height_command = 0.0 if self.ramp_steps > 0 else self._hil.command_at(self._hil.z, self.delay_steps % n)
+
+    def _compensation(self, n: int) -> HarmonicCompensation:
+        """The rig's gains at harmonics 0..N_h-1 (harmonic,height_re,height_im,force_re,force_im)."""
+        table = np.atleast_2d(np.loadtxt(Path(self.resources) / RIG_RESPONSE_FILE, delimiter=",", skiprows=1))
+        if table.shape[0] != self.harmonics or not np.array_equal(table[:, 0], np.arange(self.harmonics)):
+            raise ValueError(f"{RIG_RESPONSE_FILE} has {table.shape[0]} harmonics; the parameters keep {self.harmonics}")
+        return HarmonicCompensation(n, table[:, 1] + 1j * table[:, 2], table[:, 3] + 1j * table[:, 4])
 
     def do_step(self, current_time, step_size):
         """Take the measured force of this step and output the height to command (Paper D eqs. 2-3, 10)."""
@@ -155,7 +170,7 @@ class PantohilCatenary(PantohilSlave):
     @property
     def force_at_sample(self) -> float:
         """Output: the force in use at sample_index (the measured one, or the previous span's) [N]."""
-        return 0.0 if self._hil is None else float(self._hil.last_force[self._label])
+        return 0.0 if self._hil is None else float(self._hil.force_estimate[self._label])
 
     @property
     def slack_droppers(self) -> int:

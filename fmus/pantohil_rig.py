@@ -1,15 +1,24 @@
 """Rig FMU: the HIL rig's delay, communication decimation with the drive's ramp, servo, load-cell
-filter, force offset and noise (Paper B sec. 4, Paper D secs. 2 and 5.1)."""
+filter, force offset and noise (Paper B sec. 4, Paper D secs. 2 and 5.1); with rig_chain = 1, the
+chain of the rig file in resources/rig.toml (sub-referenced drive ramp, motion profile, position
+loop, Butterworth amplifier filter), the same file the rig emulator runs."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
 from pantohil.models.rig.chain import Rig, RigParameters
+from pantohil.models.rig.drive_chain import RigChain, latency_steps
+from pantohil.models.rig.rig_file import load_rig_file
+
+RIG_FILE = "rig.toml"
 
 VARIABLES = [
     *case_variables("rig"),
     Var("time_step", "real", "parameter", "s", "Sampling time dt", 0.001, 1e-6),
+    Var("rig_chain", "integer", "parameter", "1", "0: the parameters above; 1: the rig file resources/rig.toml "
+        "(with force_offset, noise_std, noise_seed)", 0, 0, 1),
     Var("height_command", "real", "input", "m", "Height commanded by the catenary model", 0.0),
     Var("true_force", "real", "input", "N", "Contact force at the pantograph", 0.0),
     Var("actuator_height", "real", "output", "m", "Height reached by the actuator", 0.0),
@@ -35,6 +44,13 @@ class PantohilRig(PantohilSlave):
 
     def exit_initialization_mode(self):
         """Build the rig at its starting height and force, and output its latency in steps."""
+        if self.rig_chain == 1:
+            spec = load_rig_file(Path(self.resources) / RIG_FILE)
+            self._rig = RigChain(spec, self.time_step, self.height_command, self.true_force, self.force_offset_N,
+                                 self.noise_std_N, int(self.noise_seed))
+            self.latency_steps = latency_steps(spec, self.time_step)
+            self.actuator_height = self.height_command
+            return
         params = self._params()
         self._rig = Rig(params, self.time_step, self.height_command, self.true_force)
         self.latency_steps = params.latency_steps(self.time_step)

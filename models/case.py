@@ -34,7 +34,12 @@ from pantohil.models.parameters import (
     section_keys,
 )
 from pantohil.models.rig.chain import RigParameters
+from pantohil.models.rig.drive_chain import RigSpec, frequency_response
+from pantohil.models.rig.drive_chain import latency_steps as chain_latency_steps
+from pantohil.models.rig.drive_chain import pattern_spans as chain_pattern_spans
+from pantohil.models.rig.rig_file import RigFileError, load_rig_file
 
+_RIG_CHAIN_KEYS = ("delay_steps", "comm_decimation", "servo_bandwidth_hz", "servo_damping", "loadcell_cutoff_hz")
 DEFAULT_CASE = CASES_DIR / "asm_250.toml"
 
 
@@ -191,6 +196,32 @@ class Case:
     delay_override: int | None  # None: automatic (hil.delay_steps = "auto")
     model: str = "asm"
     definition_path: Path | None = None
+    rig_spec: RigSpec | None = None  # the rig file's chain, if the case names one
+    rig_compensation: str = "delay"
+
+    @property
+    def compensates_rig_response(self) -> bool:
+        return self.rig_spec is not None and self.rig_compensation == "response" and self.delay_compensation
+
+    def rig_latency_steps(self) -> int:
+        """The rig's latency in whole steps (its low-frequency group delay, rounded)."""
+        if self.rig_spec is not None:
+            return chain_latency_steps(self.rig_spec, self.dt_s)
+        return self.rig.latency_steps(self.dt_s)
+
+    def rig_period_spans(self) -> int:
+        """Spans after which the steady state repeats (the rig's clocks against the span)."""
+        if self.rig_spec is None:
+            return 1
+        return chain_pattern_spans(self.rig_spec, self.dt_s, self.samples_per_span)
+
+    def rig_response(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rig's gains at the kept harmonics: the rig file's measured response, else its model's."""
+        if self.rig_spec.measured is not None:
+            freqs = np.arange(self.n_harmonics) / (self.samples_per_span * self.dt_s)
+            gz, gf = self.rig_spec.measured.at(freqs[1:])
+            return np.concatenate([[1.0], gz]), np.concatenate([[1.0], gf])
+        return frequency_response(self.rig_spec, self.dt_s, self.samples_per_span, self.n_harmonics)
 
     def pfem_settings(self):
         """The discretisation of this case's PFEM operators (Paper C sec. 3, Paper D sec. 3.5/3.7)."""
@@ -229,8 +260,9 @@ class Case:
         """Delay advance D = loop latency of the master's connections + the rig's latency."""
         if self.delay_override is not None:
             return self.delay_override
-        rig = self.rig.latency_steps(self.dt_s) if self.delay_compensation else 0
-        return loop_steps + rig
+        if not self.delay_compensation or self.compensates_rig_response:
+            return loop_steps  # the rig's own delays are in its compensated response
+        return loop_steps + self.rig_latency_steps()
 
 
 def mean_force_en50367(speed_kmh: float) -> float:
@@ -318,6 +350,24 @@ def _check_profile(v: dict, case_path: Path):
     return DropperProfile(span, tuple(np.cumsum(spacing)[:-1]), pr["wire_mass_kg_m"], tension, pr["presag_m"])
 
 
+def _check_rig_file(v: dict, source: Path, dt: float, given: dict) -> RigSpec | None:
+    """[rig] file: the rig chain of a rig file, at the case's dt."""
+    name = v["rig"]["file"]
+    if not name:
+        return None
+    clash = [k for k in _RIG_CHAIN_KEYS if k in given]
+    if clash:
+        raise CaseError(f"rig.{clash[0]}: not with rig.file (the rig file describes the chain)")
+    try:
+        spec = load_rig_file(source.parent / name)
+    except RigFileError as exc:
+        raise CaseError(f"rig.file: {exc}") from None
+    if abs(spec.model_step_s - dt) > 1e-6 * dt:
+        raise CaseError(f"rig.file: the rig runs at dt = {spec.model_step_s:g} s; the case's step is {dt:.6g} s "
+                        f"(set run.dt_s so that the span holds a whole number of rig steps)")
+    return spec
+
+
 def build_case(raw: dict, source: Path) -> Case:
     """Validate a parsed case (taking ASM2 data and z0 from its catenary file if it names one) into a Case.
 
@@ -343,8 +393,9 @@ def build_case(raw: dict, source: Path) -> Case:
                         f"frequency {nyquist:.1f} Hz of dt = {dt:.6g} s")
     pan = _check_pantograph(v)
     r = v["rig"]
-    rig = RigParameters(**r)
-    if rig.latency_steps(dt) >= n:
+    rig = RigParameters(**{k: val for k, val in r.items() if k != "file"})
+    rig_spec = _check_rig_file(v, source, dt, raw.get("rig", {}))
+    if rig_spec is None and rig.latency_steps(dt) >= n:
         raise CaseError(f"rig.delay_steps: the rig's latency ({rig.latency_steps(dt)} steps) must be shorter "
                         f"than a span ({n} steps)")
     delay_override = None if hil["delay_steps"] == AUTO else hil["delay_steps"]
@@ -365,7 +416,8 @@ def build_case(raw: dict, source: Path) -> Case:
                             f"frequency pi/dt = {math.pi / dt:.1f} rad/s")
     return Case(v["case"]["name"], source, v, cat, pan, rig, profile, speed, span, n, dt,
                 harmonic_count(hil["max_frequency_hz"], n, dt), hil["update"], hil["relaxation"],
-                hil["ramp_steps"], hil["delay_compensation"], delay_override, model, definition)
+                hil["ramp_steps"], hil["delay_compensation"], delay_override, model, definition, rig_spec,
+                hil["rig_compensation"])
 
 
 def load_case(path: Path | None = None, overrides: list[str] | None = None) -> Case:

@@ -160,6 +160,8 @@ class RigSection:
     force_offset_N: float = param(0.0, "N", "force added to the measurement", -1e4, 1e4, fmu="rig")
     noise_std_N: float = param(0.0, "N", "measurement noise standard deviation", 0.0, 1e4, fmu="rig")
     noise_seed: int = param(0, "1", "seed of the measurement noise", 0, XS_INT_MAX, fmu="rig")
+    file: str = param("", "1", "rig file (relative to the case; models/data/rigs/*.toml): the chain of Paper B or "
+                               "D, which replaces the five keys above (force offset and noise still apply)")
 
 
 @dataclass(frozen=True)
@@ -204,8 +206,15 @@ class HilSection:
     ramp_steps: int = param(0, "1", "initial ramp N_r [steps]", 0, 100_000_000, fmu="catenary")
     delay_compensation: bool = param(True, "1", "advance the height by the rig's latency")
     delay_steps: int = param(AUTO, "1", "delay advance D [steps]; \"auto\": the loop latency of the master plus "
+<<<<<<< HEAD
                                         "the rig's (Paper D sec. 3.4)", 0, 100_000, fmu="catenary", auto=True,
                              fmu_start=1)
+=======
+                                        "the rig's (Paper D sec. 3.4)", 0, 100_000, fmu="catenary", auto=True)
+    rig_compensation: str = param("response", "1", "with a rig file: compensate its frequency response at the kept "
+                                                   "harmonics (\"response\"), or only its latency in whole steps "
+                                                   "(\"delay\")", choices=("response", "delay"))
+>>>>>>> ea544ae (Rig files and the rig chains of Papers B and D; compensation of the rig's response at the kept harmonics (command G_z^-1, force G_f^-1); Paper B/D cases; paper_b_mass_300 0.26 % of the closed form (delay only 6.8 %))
 
 
 @dataclass(frozen=True)

@@ -181,9 +181,11 @@ def delay_plan(case: Case, topology: Topology = VIRTUAL) -> dict:
     d = case.delay_steps(loop)
     if d >= case.samples_per_span:
         raise CaseError(f"rig.delay_steps: the delay advance D = {d} steps (loop {loop} + rig "
-                        f"{case.rig.latency_steps(case.dt_s)}) must be shorter than a span "
+                        f"{case.rig_latency_steps()}) must be shorter than a span "
                         f"({case.samples_per_span} steps)")
-    return {"delay_steps": d, "loop_latency_steps": loop, "rig_latency_steps": case.rig.latency_steps(case.dt_s)}
+    return {"delay_steps": d, "loop_latency_steps": loop, "rig_latency_steps": case.rig_latency_steps(),
+            "rig_compensation": "response" if case.compensates_rig_response else "delay",
+            "steady_state_period_spans": case.rig_period_spans()}
 
 
 def closed_form_reference(case: Case):
@@ -328,7 +330,7 @@ def start(state: RunState) -> None:
         mcap.recorder.close()
         raise
     state.observers.insert(0, mcap)
-    state.monitor = ConvergenceMonitor(case.samples_per_span)
+    state.monitor = ConvergenceMonitor(case.samples_per_span, case.rig_period_spans())
     if options.resume is not None:
         try:
             state.first_span = checkpoint.restore(options.resume, state.master, state.monitor, prepared.fmus)

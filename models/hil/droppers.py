@@ -7,6 +7,7 @@ from eq. (40) for the droppers that slacken; the height command is taken D sampl
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -19,10 +20,14 @@ class PfemHil:
     """HIL iteration on PFEM operators with dropper slackening (Paper C sec. 5.3, Paper D eqs. 11-12)."""
     # fixed after construction (not part of an FMU state)
     CONSTANT_ATTRIBUTES = ("ops", "s", "z0", "_dc", "_dd", "_basis", "f0", "kd", "win", "_d", "_window_index",
-                           "_basis_at", "_dd_at", "_slack_below")
+                           "_basis_at", "_dd_at", "_slack_below", "comp")
 
     def __init__(self, ops: PfemOperators, settings: HilSettings, dropper_relaxation: float = 1.0,
-                 droppers: bool = True):
+                 droppers: bool = True, compensation=None):
+        """`compensation` (a `HarmonicCompensation`, optional): the rig's dynamics compensated at the kept
+        harmonics: the contact columns take measured forces (B), the command is A z."""
+        if compensation is not None:
+            ops = replace(ops, cc=compensation.compensate_rows(ops.cc), dc=compensation.compensate_rows(ops.dc))
         if settings.update not in UPDATES:
             raise ValueError(f"hil.update must be one of {UPDATES}, got {settings.update!r}")
         self.ops, self.s = ops, settings
@@ -36,6 +41,8 @@ class PfemHil:
         self.k = 0
         self.force_relaxed = np.zeros(n)
         self.last_force = np.zeros(n)
+        self.comp = compensation
+        self.force_estimate = self.last_force if compensation is None else np.zeros(n)  # B f: the true force
         jd = ops.settings.n_harmonics_dropper
         # elongations as the real and imaginary parts of their harmonics over the window index, so that
         # one step is a few small real products
@@ -74,6 +81,10 @@ class PfemHil:
         """The converging estimate of the contact-wire height at a sample."""
         return float(self.z[label])
 
+    def command_at(self, z: np.ndarray, target: int) -> float:
+        """The height to command for sample `target`: z there, or (A z) there with the rig compensated."""
+        return float(z[target]) if self.comp is None else self.comp.command(z, target)
+
     def step(self, force: float) -> float:
         """Take the force measured at the current sample and return the height to command.
 
@@ -84,6 +95,8 @@ class PfemHil:
         """
         n_bar = self.k % self.n
         if not math.isnan(force):
+            if self.comp is not None:
+                self.force_estimate += (force - self.last_force[n_bar]) * self.comp.force_column(n_bar)
             self.last_force[n_bar] = force
             delta = self.s.relaxation * (force - self.force_relaxed[n_bar])  # Paper D eq. (10)
             if delta != 0.0:
@@ -94,11 +107,12 @@ class PfemHil:
         if self.nd:
             self._correct(n_bar)
         if self.s.update == "step":
-            command = self.z[(n_bar + self.s.delay_steps) % self.n]
+            command = self.command_at(self.z, (n_bar + self.s.delay_steps) % self.n)
         else:
             target = (n_bar + self.s.delay_steps) % self.n
             w_new = (n_bar + 1) / self.n
-            command = (1.0 - w_new) * self._z_older[target] + w_new * self._z_block[target]
+            command = ((1.0 - w_new) * self.command_at(self._z_older, target)
+                       + w_new * self.command_at(self._z_block, target))
             if n_bar == self.n - 1:
                 self._z_older, self._z_block = self._z_block, self.z.copy()
         self.k += 1

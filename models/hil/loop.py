@@ -31,9 +31,11 @@ class PeriodicHil:
     `z0` is the (frequency-reduced) wire height at the N samples.
     """
 
-    CONSTANT_ATTRIBUTES = ("op", "z0", "s")  # fixed after construction (not part of an FMU state)
+    CONSTANT_ATTRIBUTES = ("op", "z0", "s", "comp")  # fixed after construction (not part of an FMU state)
 
-    def __init__(self, operator, z0: np.ndarray, settings: HilSettings):
+    def __init__(self, operator, z0: np.ndarray, settings: HilSettings, compensation=None):
+        """`compensation` (a `HarmonicCompensation`, optional): the rig's dynamics compensated at the kept
+        harmonics; `operator` must then already take measured forces (I B)."""
         if settings.update not in UPDATES:
             raise ValueError(f"hil.update must be one of {UPDATES}, got {settings.update!r}")
         self.op = operator
@@ -46,6 +48,8 @@ class PeriodicHil:
         self._z_older = self.z0.copy()  # z^{b-1} while z holds z^b (span)
         self._block_force = np.zeros(self.n)
         self.last_force = np.zeros(self.n)  # the force in use at each sample (measured, or kept when lost)
+        self.comp = compensation
+        self.force_estimate = self.last_force if compensation is None else np.zeros(self.n)  # B f: the true force
 
     @property
     def sample(self) -> int:
@@ -72,6 +76,8 @@ class PeriodicHil:
         mu = self.s.relaxation
         measured = not math.isnan(force)  # NaN: not measured; the sample keeps its previous value
         if measured:
+            if self.comp is not None:
+                self.force_estimate += (force - self.last_force[n_bar]) * self.comp.force_column(n_bar)
             self.last_force[n_bar] = force
         if self.s.update == "step":
             if measured:
@@ -79,7 +85,7 @@ class PeriodicHil:
                 self.force_relaxed[n_bar] += delta
                 if delta != 0.0:
                     self.z += delta * self.op.column(n_bar)
-            command = self.z[(n_bar + self.s.delay_steps) % self.n]
+            command = self.command_at(self.z, (n_bar + self.s.delay_steps) % self.n)
         else:
             if measured:
                 self._block_force[n_bar] = force
@@ -93,29 +99,38 @@ class PeriodicHil:
             command *= self.k / self.s.ramp_steps
         return float(command)
 
+    def command_at(self, z: np.ndarray, target: int) -> float:
+        """The height to command for sample `target`: z there, or (A z) there with the rig compensated."""
+        return float(z[target]) if self.comp is None else self.comp.command(z, target)
+
     def _span_command(self, n_bar: int) -> float:
         """Linear blend of the two latest block vectors, Paper D eq. (3), with the delay rotation (A.11)."""
         target = (n_bar + self.s.delay_steps) % self.n
         w_new = (n_bar + 1) / self.n
-        return (1.0 - w_new) * self._z_older[target] + w_new * self.z[target]
+        return (1.0 - w_new) * self.command_at(self._z_older, target) + w_new * self.command_at(self.z, target)
 
 
 class ConvergenceMonitor:
-    """Span-to-span change of the measured force: rms(f^b - f^(b-1)) / std(f^b)."""
+    """Span-to-span change of the measured force: rms(f^b - f^(b-P)) / std(f^b).
 
-    def __init__(self, samples_per_span: int):
+    P = 1, unless the rig's own clocks (decimation, sub-references) repeat only every P spans: the
+    steady state then repeats every P spans, not every span."""
+
+    def __init__(self, samples_per_span: int, period_spans: int = 1):
         self.n = samples_per_span
+        self.period = max(1, int(period_spans))
         self.history: list[dict] = []
-        self._prev = None
+        self._prev: list[np.ndarray] = []
 
     def close_span(self, span: int, force: np.ndarray) -> dict:
         """Record one finished span: its change rms(f^b - f^(b-1)) / std(f^b), mean, std, max and min."""
         std = float(np.std(force))
-        if self._prev is None:
+        if len(self._prev) < self.period:
             change = float("inf")
         else:
-            change = float(np.sqrt(np.mean((force - self._prev) ** 2)) / max(std, 1e-12))
-        self._prev = force.copy()
+            change = float(np.sqrt(np.mean((force - self._prev[0]) ** 2)) / max(std, 1e-12))
+            self._prev.pop(0)
+        self._prev.append(force.copy())
         rec = {"span": span, "change": change, "mean_N": float(np.mean(force)), "std_N": std,
                "max_N": float(np.max(force)), "min_N": float(np.min(force))}
         self.history.append(rec)

@@ -1,0 +1,78 @@
+"""The virtual HIL loop of an ASM case through its rig, in process, with the FMU master's semantics.
+
+catenary -> rig -> pantograph -> rig -> catenary with Jacobi stepping: at step k every block gets
+the outputs of step k-1 (one step per connection, 4 in the loop), as `orchestrator.master` steps
+the three FMUs. It runs the same model classes as the FMUs, so it gives the same iteration without
+building them: for studies of rig compensation and for tests.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..case import Case
+from ..catenary.receptance import CirculantOperator, asm_operator, reduce_harmonics
+from ..pantograph.lumped import make_pantograph
+from ..rig.chain import Rig
+from ..rig.compensation import HarmonicCompensation
+from ..rig.drive_chain import RigChain
+from .loop import ConvergenceMonitor, PeriodicHil
+
+LOOP_CONNECTIONS = 4
+
+
+@dataclass
+class LoopResult:
+    status: str  # "converged", "diverged" or "span_limit"
+    spans: int
+    force_N: np.ndarray  # the force the catenary uses over the last span (f_N of steady_span.csv)
+    history: list
+
+
+def case_iteration(case: Case, delay_steps: int) -> PeriodicHil:
+    """The catenary FMU's iteration for an ASM case (with the rig's response compensated if the case says so)."""
+    n, n_h = case.samples_per_span, case.n_harmonics
+    op = asm_operator(case.catenary, case.speed_m_s, n, case.dt_s, n_h)
+    comp = None
+    if case.compensates_rig_response:
+        comp = HarmonicCompensation(n, *case.rig_response())
+        op = CirculantOperator(comp.compensate_kernel(op.kernel))
+    return PeriodicHil(op, reduce_harmonics(case.z0_samples(), n_h), case.hil_settings(delay_steps), comp)
+
+
+def case_rig(case: Case):
+    r = case.values["rig"]
+    if case.rig_spec is not None:
+        return RigChain(case.rig_spec, case.dt_s, 0.0, 0.0, r["force_offset_N"], r["noise_std_N"], r["noise_seed"])
+    return Rig(case.rig, case.dt_s)
+
+
+def run_loop(case: Case, force_limit_N: float | None = None) -> LoopResult:
+    """Run the case's loop until the span-to-span change is below run.convergence_tol (after the ramp),
+    the force leaves run.force_limit_N, or run.max_spans."""
+    run = case.values["run"]
+    n = case.samples_per_span
+    hil = case_iteration(case, case.delay_steps(LOOP_CONNECTIONS))
+    rig = case_rig(case)
+    pan = make_pantograph(case.pantograph, case.dt_s, case.reference_height_m())
+    monitor = ConvergenceMonitor(n, case.rig_period_spans())
+    limit = force_limit_N or run["force_limit_N"]
+    cmd, act, meas, f = 0.0, 0.0, 0.0, pan.settle(0.0)
+    status, span = "span_limit", 0
+    used = np.zeros(n)
+    for span in range(run["max_spans"]):
+        for i in range(n):
+            cmd_new = hil.step(meas)
+            used[i] = hil.force_estimate[i]
+            act_new, meas_new = rig.step(cmd, f)
+            f = pan.step(act)
+            cmd, act, meas = cmd_new, act_new, meas_new
+        if not np.all(np.abs(used) <= limit):
+            status = "diverged"
+            break
+        rec = monitor.close_span(span, used)
+        if (span + 1) * n >= case.ramp_steps and rec["change"] <= run["convergence_tol"]:
+            status = "converged"
+            break
+    return LoopResult(status, span + 1, used.copy(), monitor.history)

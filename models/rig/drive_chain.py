@@ -1,0 +1,300 @@
+"""The thesis's rig chains, stepped at the model's dt (Paper B sec. 4, Paper D sec. 2).
+
+Height path: a pure delay (the link to the drive), one height of every N_com reaches the drive
+(`decimation`), which ramps linearly from its previous reference to the new one over `ramp_s`,
+emitting a sub-reference every `sub_step_s` (0.3125 ms on Paper B's LinMot E1400); each
+sub-reference passes the drive's acceleration/velocity-limited motion profile (`RigLimits`) and a
+position loop, modelled as a second-order closed loop (natural frequency, damping) integrated
+exactly between sub-references. The actuator height of a step is the position at the step's end.
+
+Force path: the load cells' amplifier low-pass (a Butterworth of `filter_order` at `filter_hz`,
+discretised by the bilinear transform at dt), a pure delay, then the offset and noise.
+
+The decimation and the sub-references make the chain periodically time-varying; `RigChain` is
+exact, and `frequency_response` gives its response at the kept harmonics as the fundamental of a
+multisine run of the chain itself (what an identification measures); `analytic_response` is the
+closed form of its linear time-invariant approximation (an independent check).
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+from scipy import linalg, signal
+
+from .actuator import ActuatorLimits, Limiter
+
+
+@dataclass(frozen=True)
+class HeightPath:
+    """Command to actuator height (Paper B sec. 4; Paper D sec. 2)."""
+
+    delay_steps: int = 0
+    decimation: int = 1  # N_com: one height of every N_com reaches the drive
+    ramp_s: float = 0.0  # the drive's ramp from the old to the new reference; 0: N_com dt
+    sub_step_s: float = 0.0  # the drive's sub-reference period; 0: the ramp read at every model step
+    servo_frequency_hz: float = 0.0  # position loop natural frequency; 0: ideal tracking
+    servo_damping: float = 0.7
+
+
+@dataclass(frozen=True)
+class ForcePath:
+    """True to measured force: amplifier low-pass, then acquisition delay."""
+
+    filter_hz: float = 0.0  # 0: no filter
+    filter_order: int = 2
+    delay_steps: int = 0
+
+
+@dataclass(frozen=True)
+class MeasuredResponse:
+    """A rig's frequency response measured at given frequencies (written by `pantohil rig-identify`)."""
+
+    frequencies_hz: tuple
+    height: tuple  # complex gains, command -> actuator height
+    force: tuple  # complex gains, true -> measured force
+
+    def at(self, freqs_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The gains at `freqs_hz`, each of which must be one of the measured frequencies."""
+        known = np.asarray(self.frequencies_hz)
+        idx = []
+        for f in np.atleast_1d(freqs_hz):
+            j = int(np.argmin(np.abs(known - f)))
+            if abs(known[j] - f) > 1e-6 * max(1.0, f):
+                raise ValueError(f"the measured response has no point at {f:.6g} Hz (identify the rig for this case)")
+            idx.append(j)
+        return np.asarray(self.height)[idx], np.asarray(self.force)[idx]
+
+
+@dataclass(frozen=True)
+class RigSpec:
+    """A rig file: the chain between the catenary model and the pantograph."""
+
+    name: str
+    model_step_s: float
+    height: HeightPath = field(default_factory=HeightPath)
+    force: ForcePath = field(default_factory=ForcePath)
+    limits: ActuatorLimits = field(default_factory=ActuatorLimits)
+    stated_delay_s: float = 0.0  # the total delay the paper states (for the report only)
+    description: str = ""
+    measured: MeasuredResponse | None = None
+
+    @property
+    def ramp_s(self) -> float:
+        return self.height.ramp_s or self.height.decimation * self.model_step_s
+
+
+class DiscreteFilter:
+    """A digital filter (b, a) run one sample at a time (transposed direct form II), started at rest
+    at a constant input."""
+
+    def __init__(self, b, a, initial: float):
+        a0 = float(a[0])
+        self.b = [float(v) / a0 for v in b]
+        self.a = [float(v) / a0 for v in a]
+        self.state = [float(v) for v in signal.lfilter_zi(self.b, self.a) * initial]
+
+    def __call__(self, x: float) -> float:
+        b, a, s = self.b, self.a, self.state
+        y = b[0] * x + s[0]
+        last = len(s) - 1
+        for i in range(len(s)):
+            s[i] = b[i + 1] * x - a[i + 1] * y + (s[i + 1] if i < last else 0.0)
+        return y
+
+
+def force_filter_coefficients(path: ForcePath, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Analog Butterworth low-pass at filter_hz, bilinear transform at dt (identity if none)."""
+    if path.filter_hz <= 0:
+        return np.array([1.0]), np.array([1.0])
+    b, a = signal.butter(path.filter_order, 2 * math.pi * path.filter_hz, analog=True)
+    bz, az = signal.bilinear(b, a, fs=1.0 / dt_s)
+    return bz, az
+
+
+@lru_cache(maxsize=256)
+def _servo_transition(wn: float, zeta: float, h_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Exact transition of x' = A x + B u over h with u held (zero-order hold)."""
+    h = h_ns * 1e-12
+    m = np.zeros((3, 3))
+    m[0, 1] = 1.0
+    m[1, 0], m[1, 1], m[1, 2] = -wn * wn, -2 * zeta * wn, wn * wn
+    e = linalg.expm(m * h)
+    return e[:2, :2].copy(), e[:2, 2].copy()
+
+
+class _Drive:
+    """Decimated references, the linear ramp at sub-steps, the motion profile and the position loop."""
+
+    def __init__(self, spec: RigSpec, dt_s: float, z0: float):
+        hp = spec.height
+        self.hp, self.dt, self.ramp = hp, dt_s, spec.ramp_s
+        self.tau = hp.sub_step_s
+        self.z_old = self.z_new = self.u = z0
+        self.t_arrival = -1.0
+        self.k = 0
+        self.limiter = Limiter(spec.limits, self.tau or dt_s, z0)
+        self.wn = 2 * math.pi * hp.servo_frequency_hz
+        self.x = np.array([z0, 0.0])
+        self.tick = 0  # sub-references emitted so far (the drive's own clock)
+
+    def _ramp_at(self, t: float) -> float:
+        frac = min(max((t - self.t_arrival) / self.ramp, 0.0), 1.0)
+        return self.z_old + (self.z_new - self.z_old) * frac
+
+    def _advance(self, h: float) -> None:
+        if self.wn > 0 and h > 0:
+            phi, gam = _servo_transition(self.wn, self.hp.servo_damping, int(round(h * 1e12)))
+            self.x = phi @ self.x + gam * self.u
+
+    def step(self, z: float) -> float:
+        t0 = self.k * self.dt
+        if self.k % self.hp.decimation == 0:  # a new reference reaches the drive (Paper B sec. 4)
+            self.z_old, self.z_new, self.t_arrival = self.z_new, z, t0
+        self.k += 1
+        t1 = self.k * self.dt
+        if self.tau <= 0:
+            self._advance(t1 - t0)
+            self.u = self.limiter(self._ramp_at(t1))[0]
+        else:
+            t = t0
+            while (self.tick + 1) * self.tau <= t1 + 1e-12:  # sub-references inside this step
+                self.tick += 1
+                ts = self.tick * self.tau
+                self._advance(ts - t)
+                self.u, t = self.limiter(self._ramp_at(ts))[0], ts
+            self._advance(t1 - t)
+        return float(self.x[0]) if self.wn > 0 else self.u
+
+
+class RigChain:
+    """A rig file's chain at the model's dt. `step(z_command, f_true)` -> (actuator height, measured force)."""
+
+    def __init__(self, spec: RigSpec, dt_s: float, initial_height: float = 0.0, initial_force: float = 0.0,
+                 force_offset_N: float = 0.0, noise_std_N: float = 0.0, noise_seed: int = 0):
+        self.spec, self.dt = spec, dt_s
+        hp, fp = spec.height, spec.force
+        self._zdelay = deque([initial_height] * hp.delay_steps)
+        self._fdelay = deque([initial_force] * fp.delay_steps)
+        self._drive = _Drive(spec, dt_s, initial_height)
+        b, a = force_filter_coefficients(fp, dt_s)
+        self._filter = DiscreteFilter(b, a, initial_force)
+        self.offset, self.noise = force_offset_N, noise_std_N
+        self._rng = np.random.default_rng(noise_seed)
+
+    @staticmethod
+    def _through(line: deque, x: float) -> float:
+        if not line:
+            return x
+        line.append(x)
+        return line.popleft()
+
+    def height(self, z_command: float) -> float:
+        return self._drive.step(self._through(self._zdelay, z_command))
+
+    def force(self, f_true: float) -> float:
+        f = self._through(self._fdelay, self._filter(f_true)) + self.offset
+        if self.noise > 0:
+            f += float(self._rng.normal(0.0, self.noise))
+        return f
+
+    def step(self, z_command: float, f_true: float) -> tuple[float, float]:
+        return self.height(z_command), self.force(f_true)
+
+
+def analytic_response(spec: RigSpec, dt_s: float, freqs_hz) -> tuple[np.ndarray, np.ndarray]:
+    """Closed form of the chain's linear time-invariant approximation (command -> height, true -> measured).
+
+    Sampling every T = N_com dt and ramping over T_r is, averaged over the sampling phase, the kernel
+    w(s) = r(s) - r(s - T) with r the unit ramp of length T_r, over T: W(w) = (1 - e^{-iwT})
+    (1 - e^{-iwT_r}) / (T T_r (iw)^2); read at the step's end (e^{iw dt}); sub-references every tau
+    held: e^{-iw tau/2} sinc(w tau/2); position loop w_n^2 / (w_n^2 - w^2 + 2 i zeta w_n w); pure
+    delays e^{-iw d dt}; the force filter exactly (its bilinear form at dt).
+    """
+    w = 2 * np.pi * np.asarray(freqs_hz, dtype=float)
+    hp, fp = spec.height, spec.force
+    gz = np.exp(-1j * w * hp.delay_steps * dt_s)
+    if hp.decimation > 1 or hp.ramp_s > 0:
+        T, Tr = hp.decimation * dt_s, spec.ramp_s
+        iw = 1j * np.where(w == 0, 1.0, w)
+        ramp = (1 - np.exp(-iw * T)) * (1 - np.exp(-iw * Tr)) / (T * Tr * iw**2)
+        gz = gz * np.where(w == 0, 1.0, ramp) * np.exp(1j * w * dt_s)
+    if hp.sub_step_s > 0:
+        x = w * hp.sub_step_s / 2
+        gz = gz * np.exp(-1j * x) * np.sinc(x / np.pi)
+    if hp.servo_frequency_hz > 0:
+        wn = 2 * np.pi * hp.servo_frequency_hz
+        gz = gz * wn**2 / (wn**2 - w**2 + 2j * hp.servo_damping * wn * w)
+    b, a = force_filter_coefficients(fp, dt_s)
+    _, gf = signal.freqz(b, a, worN=w * dt_s)
+    gf = gf * np.exp(-1j * w * fp.delay_steps * dt_s)
+    return gz, gf
+
+
+def frequency_response(spec: RigSpec, dt_s: float, samples_per_span: int, n_harmonics: int,
+                       amplitude_m: float = 1e-3, amplitude_N: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """The chain's response at harmonics 0..N_h-1 of the span: the fundamental of a Schroeder multisine
+    run through `RigChain` itself, over whole spans after a settling span; at DC the gain is 1 (no drift).
+
+    Exact for the linear time-invariant parts; for the decimation and the sub-references it is the
+    response averaged over their phase within the record (the aliased parts fall above the kept band
+    when N_com dt < 1 / (2 f_max))."""
+    n = samples_per_span
+    pattern = _pattern_steps(spec, dt_s)
+    spans = max(1, pattern // math.gcd(pattern, n))
+    while spans < 4:
+        spans *= 2
+    k = np.arange(1, n_harmonics)
+    phase = -np.pi * k * (k - 1) / max(len(k), 1)  # Schroeder phases: low crest factor
+    total = (spans + 1) * n
+    t = np.arange(total) * dt_s
+    omega = 2 * np.pi * k / (n * dt_s)
+    shape = np.cos(np.outer(t, omega) + phase).sum(axis=1) / max(len(k), 1) ** 0.5 if len(k) else np.zeros(total)
+    z_in, f_in = amplitude_m * shape, amplitude_N * shape
+    chain = RigChain(spec, dt_s)
+    out = np.array([chain.step(z, f) for z, f in zip(z_in, f_in)])
+    rec = slice(n, total)
+    gz, gf = np.ones(n_harmonics, complex), np.ones(n_harmonics, complex)
+    if len(k):
+        bins = k * spans
+        gz[1:] = np.fft.rfft(out[rec, 0])[bins] / np.fft.rfft(z_in[rec])[bins]
+        gf[1:] = np.fft.rfft(out[rec, 1])[bins] / np.fft.rfft(f_in[rec])[bins]
+    return gz, gf
+
+
+def _pattern_steps(spec: RigSpec, dt_s: float) -> int:
+    """Steps after which the decimation and the sub-reference clock repeat."""
+    p = max(1, spec.height.decimation)
+    tau = spec.height.sub_step_s
+    if tau > 0:
+        ratio = dt_s / tau
+        for q in range(1, 1001):  # dt / tau = p'/q: the clocks align every q steps
+            if abs(ratio * q - round(ratio * q)) < 1e-9:
+                p = p * q // math.gcd(p, q)
+                break
+    return p
+
+
+def pattern_spans(spec: RigSpec, dt_s: float, samples_per_span: int, limit: int = 8) -> int:
+    """Spans after which the rig's clocks are back at the same phase within the span (at most `limit`;
+    beyond it the pattern is treated as unrelated to the span and the steady state as span-periodic)."""
+    p = _pattern_steps(spec, dt_s)
+    spans = p // math.gcd(p, samples_per_span)
+    return spans if spans <= limit else 1
+
+
+def group_delay_s(spec: RigSpec, dt_s: float) -> dict:
+    """Low-frequency group delays of the two paths and their sum (the rig's latency)."""
+    f = np.array([0.05])
+    gz, gf = analytic_response(spec, dt_s, f)
+    w = 2 * np.pi * f[0]
+    hz, hf = -float(np.angle(gz[0])) / w, -float(np.angle(gf[0])) / w
+    return {"height_s": hz, "force_s": hf, "total_s": hz + hf}
+
+
+def latency_steps(spec: RigSpec, dt_s: float) -> int:
+    """The rig's latency rounded to whole steps (the pure delay advance of Paper D sec. 3.4)."""
+    return int(round(group_delay_s(spec, dt_s)["total_s"] / dt_s))

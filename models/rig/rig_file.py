@@ -1,0 +1,176 @@
+"""Rig files (TOML): a rig chain as the papers describe it, read into a `RigSpec` and written back
+with a measured frequency response (`pantohil rig-identify`). Every key is declared once below with
+its type, default, range and unit; a bad file raises RigFileError with one line naming the key.
+"""
+from __future__ import annotations
+
+import cmath
+import math
+from dataclasses import replace
+from pathlib import Path
+
+from ..input_files import InputFileError, load_toml
+from .actuator import ActuatorLimits
+from .drive_chain import ForcePath, HeightPath, MeasuredResponse, RigSpec
+
+
+class RigFileError(ValueError):
+    """A rig file that cannot be used; the message is one line naming the key."""
+
+
+# section -> key -> (type, default, check, requirement, description [unit])
+SCHEMA = {
+    "rig": {
+        "name": (str, "unnamed", None, "", "rig name"),
+        "description": (str, "", None, "", "free text"),
+        "model_step_s": (float, None, lambda x: x > 0, "must be > 0", "model step dt the rig runs at [s]"),
+        "stated_delay_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "total delay the source states [s]"),
+    },
+    "height": {
+        "delay_steps": (int, 0, lambda x: x >= 0, "must be >= 0", "pure delay to the drive [steps]"),
+        "decimation": (int, 1, lambda x: x >= 1, "must be >= 1", "N_com: one height of every N_com sent [-]"),
+        "ramp_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "drive ramp, 0 = N_com dt [s]"),
+        "sub_step_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "drive sub-reference period, 0 = none [s]"),
+        "servo_frequency_hz": (float, 0.0, lambda x: x >= 0, "must be >= 0", "position loop natural frequency, 0 = ideal [Hz]"),
+        "servo_damping": (float, 0.7, lambda x: x > 0, "must be > 0", "position loop damping ratio [-]"),
+    },
+    "force": {
+        "filter_hz": (float, 0.0, lambda x: x >= 0, "must be >= 0", "amplifier low-pass cut-off, 0 = none [Hz]"),
+        "filter_order": (int, 2, lambda x: 1 <= x <= 8, "must be 1 to 8", "Butterworth order [-]"),
+        "delay_steps": (int, 0, lambda x: x >= 0, "must be >= 0", "acquisition delay [steps]"),
+    },
+    "limits": {
+        "stroke_min_m": (float, -0.12, None, "", "lowest actuator position [m]"),
+        "stroke_max_m": (float, 0.12, None, "", "highest actuator position [m]"),
+        "max_velocity_m_s": (float, 5.4, lambda x: x > 0, "must be > 0", "motion-profile velocity limit [m/s]"),
+        "max_acceleration_m_s2": (float, 300.0, lambda x: x > 0, "must be > 0", "motion-profile acceleration limit [m/s^2]"),
+    },
+    "response": {
+        "frequencies_hz": (list, None, None, "", "measured frequencies [Hz]"),
+        "height_gain": (list, None, None, "", "|actuator height / command| [-]"),
+        "height_phase_deg": (list, None, None, "", "phase of actuator height / command [deg]"),
+        "force_gain": (list, None, None, "", "|measured / true force| [-]"),
+        "force_phase_deg": (list, None, None, "", "phase of measured / true force [deg]"),
+    },
+}
+
+
+def _value(section: str, key: str, raw, typ):
+    name = f"{section}.{key}"
+    if typ is float and isinstance(raw, int) and not isinstance(raw, bool):
+        raw = float(raw)
+    if typ is list:
+        if not isinstance(raw, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in raw):
+            raise RigFileError(f"{name}: expected a list of numbers, got {raw!r}")
+        return [float(v) for v in raw]
+    if not isinstance(raw, typ) or isinstance(raw, bool):
+        raise RigFileError(f"{name}: expected {typ.__name__}, got {raw!r}")
+    if typ is float and not math.isfinite(raw):
+        raise RigFileError(f"{name}: must be finite, got {raw!r}")
+    return raw
+
+
+def _validated(raw: dict) -> dict:
+    for section in raw:
+        if section not in SCHEMA:
+            raise RigFileError(f"{section}: unknown section (known: {', '.join(SCHEMA)})")
+        if not isinstance(raw[section], dict):
+            raise RigFileError(f"{section}: expected a table of keys")
+    out = {}
+    for section, keys in SCHEMA.items():
+        given = raw.get(section, {})
+        for key in given:
+            if key not in keys:
+                raise RigFileError(f"{section}.{key}: unknown key (known: {', '.join(keys)})")
+        out[section] = {}
+        for key, (typ, default, check, req, _doc) in keys.items():
+            if key not in given:
+                if default is None and section == "rig":
+                    raise RigFileError(f"{section}.{key}: missing (required)")
+                out[section][key] = default
+                continue
+            value = _value(section, key, given[key], typ)
+            if check is not None and not check(value):
+                raise RigFileError(f"{section}.{key}: {req} (got {value!r})")
+            out[section][key] = value
+    return out
+
+
+def _measured(resp: dict) -> MeasuredResponse | None:
+    given = {k: v for k, v in resp.items() if v is not None}
+    if not given:
+        return None
+    missing = [k for k in SCHEMA["response"] if k not in given]
+    if missing:
+        raise RigFileError(f"response.{missing[0]}: missing (the response needs all of {', '.join(SCHEMA['response'])})")
+    n = len(given["frequencies_hz"])
+    for key, vals in given.items():
+        if len(vals) != n:
+            raise RigFileError(f"response.{key}: {len(vals)} values for {n} frequencies")
+    if any(g <= 0 for g in given["height_gain"] + given["force_gain"]):
+        raise RigFileError("response: every gain must be > 0")
+    z = tuple(g * cmath.exp(1j * math.radians(p)) for g, p in zip(given["height_gain"], given["height_phase_deg"]))
+    f = tuple(g * cmath.exp(1j * math.radians(p)) for g, p in zip(given["force_gain"], given["force_phase_deg"]))
+    return MeasuredResponse(tuple(given["frequencies_hz"]), z, f)
+
+
+def rig_from_dict(raw: dict) -> RigSpec:
+    v = _validated(raw)
+    r, h, f, lim = v["rig"], v["height"], v["force"], v["limits"]
+    if not lim["stroke_min_m"] < lim["stroke_max_m"]:
+        raise RigFileError(f"limits.stroke_max_m: must be above limits.stroke_min_m ({lim['stroke_min_m']:g} m)")
+    dt = r["model_step_s"]
+    if h["sub_step_s"] > dt * h["decimation"] + 1e-15 and h["sub_step_s"] > 0:
+        raise RigFileError(f"height.sub_step_s: {h['sub_step_s']:g} s is longer than a reference period "
+                           f"(N_com dt = {dt * h['decimation']:g} s)")
+    if h["ramp_s"] > dt * h["decimation"] + 1e-15:
+        raise RigFileError(f"height.ramp_s: {h['ramp_s']:g} s is longer than a reference period "
+                           f"(N_com dt = {dt * h['decimation']:g} s): the ramp would not finish")
+    if f["filter_hz"] >= 0.5 / dt:
+        raise RigFileError(f"force.filter_hz: {f['filter_hz']:g} Hz is at or above the Nyquist frequency {0.5 / dt:g} Hz")
+    return RigSpec(r["name"], dt, HeightPath(**h), ForcePath(**f), ActuatorLimits(**lim), r["stated_delay_s"],
+                   r["description"], _measured(v["response"]))
+
+
+def load_rig_file(path: Path) -> RigSpec:
+    try:
+        raw = load_toml(Path(path), "rig file")
+    except InputFileError as exc:
+        raise RigFileError(str(exc)) from None
+    return rig_from_dict(raw)
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(v)
+
+
+def rig_to_toml(spec: RigSpec, header: str = "") -> str:
+    """The rig file of `spec` (with its measured response, if any)."""
+    lim = spec.limits
+    sections = {
+        "rig": {"name": spec.name, "description": spec.description, "model_step_s": spec.model_step_s,
+                "stated_delay_s": spec.stated_delay_s},
+        "height": vars(spec.height), "force": vars(spec.force),
+        "limits": {k: getattr(lim, k) for k in SCHEMA["limits"]},
+    }
+    m = spec.measured
+    if m is not None:
+        sections["response"] = {
+            "frequencies_hz": [float(f) for f in m.frequencies_hz],
+            "height_gain": [abs(g) for g in m.height], "height_phase_deg": [math.degrees(cmath.phase(g)) for g in m.height],
+            "force_gain": [abs(g) for g in m.force], "force_phase_deg": [math.degrees(cmath.phase(g)) for g in m.force],
+        }
+    lines = [f"# {line}" for line in header.splitlines()]
+    for name, keys in sections.items():
+        lines += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in keys.items()]
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def with_measured(spec: RigSpec, measured: MeasuredResponse) -> RigSpec:
+    return replace(spec, measured=measured)
