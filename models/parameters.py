@@ -206,15 +206,11 @@ class HilSection:
     ramp_steps: int = param(0, "1", "initial ramp N_r [steps]", 0, 100_000_000, fmu="catenary")
     delay_compensation: bool = param(True, "1", "advance the height by the rig's latency")
     delay_steps: int = param(AUTO, "1", "delay advance D [steps]; \"auto\": the loop latency of the master plus "
-<<<<<<< HEAD
                                         "the rig's (Paper D sec. 3.4)", 0, 100_000, fmu="catenary", auto=True,
                              fmu_start=1)
-=======
-                                        "the rig's (Paper D sec. 3.4)", 0, 100_000, fmu="catenary", auto=True)
     rig_compensation: str = param("response", "1", "with a rig file: compensate its frequency response at the kept "
                                                    "harmonics (\"response\"), or only its latency in whole steps "
                                                    "(\"delay\")", choices=("response", "delay"))
->>>>>>> ea544ae (Rig files and the rig chains of Papers B and D; compensation of the rig's response at the kept harmonics (command G_z^-1, force G_f^-1); Paper B/D cases; paper_b_mass_300 0.26 % of the closed form (delay only 6.8 %))
 
 
 @dataclass(frozen=True)
