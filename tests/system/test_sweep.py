@@ -118,7 +118,7 @@ def test_an_interrupted_sweep_redoes_only_the_missing_points(tmp_path):
             time.sleep(0.1)
         os.killpg(worker.pid, signal.SIGSTOP)
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=600)
+        _, err = proc.communicate(timeout=3600)
     finally:
         for p in (worker, sched):
             os.killpg(p.pid, signal.SIGKILL)
@@ -127,7 +127,7 @@ def test_an_interrupted_sweep_redoes_only_the_missing_points(tmp_path):
     assert proc.returncode == 130, err
     first = {r["point"]: r for r in rows_of(out)}
     assert 3 <= len(first) < 12
-    again = pantohil("sweep", str(path), "--workers", "2", "--out", str(out), "--quiet")
+    again = pantohil("sweep", str(path), "--workers", "2", "--out", str(out), "--quiet", timeout=3600)
     assert again.returncode == 0, again.stderr
     assert f"{len(first)} already done, {12 - len(first)} to run" in again.stdout
     rows = {r["point"]: r for r in rows_of(out)}
