@@ -338,7 +338,8 @@ def start(state: RunState) -> None:
             mcap.recorder.close()
             state.master.close()
             raise
-    state.pacer = Pacer(case.dt_s, case.values["run"]["max_spans"] * case.samples_per_span) if options.realtime else None
+    paced_steps = case.values["run"]["max_spans"] * case.samples_per_span
+    state.pacer = Pacer(case.dt_s, paced_steps) if options.realtime else None
     state.master.pacer = state.pacer
     # a rig-paced master sleeps on the rig's samples, so it may take the real-time priority too
     paced = options.realtime or state.rig_paced
