@@ -241,4 +241,5 @@ def check_fmu(fmu: Path, what: str) -> None:
 
 
 def temporary_dir(prefix: str) -> Path:
+    """A new temporary folder whose name starts with `prefix`."""
     return Path(tempfile.mkdtemp(prefix=prefix))

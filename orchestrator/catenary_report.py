@@ -86,6 +86,7 @@ def _stiffness_plot(path: Path, a: CatenaryAnalysis) -> None:
 
 
 def catenary_report(path: Path, out_dir: Path) -> dict:
+    """`pantohil catenary`: analyse a catenary file and write catenary.json, CSV files and plots to out_dir."""
     t0 = time.perf_counter()
     cat = load_definition(path)
     a = analyse(cat)

@@ -17,6 +17,7 @@ CUTOFF_HZ = LOWPASS_CUTOFF_HZ
 
 
 def central_spans(n_spans: int, central: int) -> list[int]:
+    """Indices of the `central` spans in the middle of an n-span section, with 2 spans on each side."""
     if n_spans < 1:
         raise CaseError(f"spans: must be at least 1 (got {n_spans})")
     if central < 1:
@@ -29,12 +30,18 @@ def central_spans(n_spans: int, central: int) -> list[int]:
 
 
 def force_statistics(f: np.ndarray) -> dict:
+    """Mean, std, max, min and mean +- 3 std of a contact force [N]."""
     mean, std = float(np.mean(f)), float(np.std(f))
     return {"mean_N": mean, "std_N": std, "stat_max_N": mean + 3 * std, "stat_min_N": mean - 3 * std,
             "max_N": float(np.max(f)), "min_N": float(np.min(f))}
 
 
 def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progress: bool = True) -> dict:
+    """`pantohil fem-sim`: simulate an n-span section of a case's catenary and write its run folder.
+
+    summary.json holds the statistics of the central spans after the 20 Hz low-pass; central_spans.csv
+    the force on the PFEM run's grid; also dropper corrections, run.mcap and plots.
+    """
     from tqdm import tqdm
 
     from pantohil.models.catenary.fe.simulation import simulate_section
@@ -132,6 +139,7 @@ def span_force(run: Path) -> tuple[np.ndarray, float, str]:
 
 
 def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
+    """`pantohil compare`: the 20 Hz contact force of two run folders, their stds and RMS difference."""
     fa, dta, la = span_force(a)
     fb, dtb, lb = span_force(b)
     if len(fa) != len(fb) or abs(dta - dtb) > 1e-12:

@@ -169,6 +169,7 @@ class RunState:
 
 
 def is_rig_paced(case: Case, options: RunOptions) -> bool:
+    """Whether the run goes through the adapter with the rig owning the clock (link.paced_by = "rig")."""
     return options.hardware is not None and case.values["link"]["paced_by"] == "rig"
 
 

@@ -39,10 +39,12 @@ def save_figure(fig, path: Path) -> None:
 
 
 def write_json_atomic(path: Path, data: dict) -> None:
+    """Write JSON to a temporary file and rename it into place, so a reader never sees half a file."""
     write_text_atomic(path, json.dumps(_clean(data), indent=2) + "\n")
 
 
 def write_steady_span(path: Path, t: np.ndarray, z0: np.ndarray, z: np.ndarray, f: np.ndarray) -> None:
+    """Write steady_span.csv (`t_s,z0_m,z_m,f_N` over the converged span), atomically."""
     rows = "\n".join(f"{a:.6f},{b:.12e},{c:.12e},{d:.12e}" for a, b, c, d in zip(t, z0, z, f, strict=False))
     write_text_atomic(path, "t_s,z0_m,z_m,f_N\n" + rows + "\n")
 
@@ -68,6 +70,7 @@ def plot_contact_force(path: Path, dt: float, spans: list[np.ndarray], reference
 
 
 def plot_convergence(path: Path, history: list[dict], tol: float, title: str) -> None:
+    """Plot the span-to-span change and the force statistics per span."""
     spans = [h["span"] for h in history]
     change = [h["change"] if math.isfinite(h["change"]) else np.nan for h in history]
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)

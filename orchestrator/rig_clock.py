@@ -52,6 +52,7 @@ class Percentiles:
         self.max_us = 0.0
 
     def add(self, us: float) -> None:
+        """Count one value [us] into its logarithmic bin."""
         self.n += 1
         self.max_us = max(self.max_us, us)
         i = 0 if us <= self.LOWEST_US else int(math.log(us / self.LOWEST_US, self.RATIO)) + 1
@@ -65,4 +66,5 @@ class Percentiles:
         return min(self.LOWEST_US * self.RATIO ** i, self.max_us)
 
     def summary(self) -> dict:
+        """p50, p99, max [us] and count of the values added."""
         return {"p50": self.quantile(0.5), "p99": self.quantile(0.99), "max": self.max_us, "n": self.n}

@@ -54,6 +54,7 @@ class RigPacing:
 
     @property
     def mode(self) -> int:
+        """The protocol's pacing code of the session: rig-paced or model-paced."""
         return proto.PACED_BY_RIG if self.paced_by == "rig" else proto.PACED_BY_MODEL
 
 
@@ -75,6 +76,7 @@ class PacedState:
     tick_late_us: Percentiles = field(default_factory=Percentiles)
 
     def record(self) -> dict:
+        """The rig-paced counters of a session: samples, answered, reused, unanswered, answer times."""
         tail = sum(1 for seq in self.sent_ns if seq > self.newest)  # sent after the model's last answer
         return {"samples": self.samples, "answered": self.answered, "reused": self.reused,
                 "unanswered": self.unanswered + len(self.sent_ns) - tail, "after_last_answer": tail,
@@ -84,6 +86,7 @@ class PacedState:
 
 @dataclass(frozen=True)
 class Faults:
+    """Probabilities of the emulator's injected faults (loss, reorder, duplicate, corrupt), delay and seed."""
     loss: float = 0.0
     reorder: float = 0.0
     duplicate: float = 0.0
@@ -104,6 +107,7 @@ class Faults:
 
 @dataclass
 class EmulatorStats:
+    """Counters of the rig emulator: sessions, commands, answers and every kind of fault."""
     sessions: int = 0
     commands: int = 0
     malformed: int = 0
@@ -142,6 +146,7 @@ class Session:
     paced: PacedState | None = None
 
     def record(self, end: str) -> dict:
+        """A session's record for the stats file: peer, id, pacing, counters, largest height, how it ended."""
         rig_paced = self.paced.record() if self.paced is not None else {}
         return {**rig_paced, "number": self.number, "peer": f"{self.peer[0]}:{self.peer[1]}", "id": f"{self.id:016x}",
                 "paced_by": "rig" if self.mode == proto.PACED_BY_RIG else "model", "dt_s": self.dt_s,
@@ -153,6 +158,7 @@ MIN_DT_S, MAX_DT_S = 1e-5, 1.0  # time steps a HELLO may ask for
 
 
 class RigEmulator:
+    """Plays the rig controller for a case over UDP: the case's rig and pantograph in lockstep."""
     def __init__(self, case: Case, listen: tuple[str, int], faults: Faults = Faults(),
                  stats_path: Path | None = None, key: bytes | None = None, session_timeout_s: float = 5.0,
                  announce=None, pacing: RigPacing = RigPacing()):
@@ -241,6 +247,8 @@ class RigEmulator:
             s.reordered += overtaken  # a swap on the wire; otherwise the held answer was only delayed
 
     def handle(self, data: bytes, peer) -> None:
+        """Handle one datagram: a session on HELLO, FORCE to a COMMAND (model-paced, after the faults), the
+        height of an ANSWER (rig-paced), the session's end on BYE; anything else is counted and dropped."""
         try:
             msg = proto.decode(data, self.key)
         except proto.Malformed as exc:
@@ -381,6 +389,7 @@ class RigEmulator:
             self._close(f"expired: no datagram from its master for {self.session_timeout_s:g} s")
 
     def write_stats(self) -> None:
+        """Write the counters and fault settings to the stats file, atomically."""
         if self.stats_path is None:
             return
         stats = {**asdict(self.stats), "faults": asdict(self.faults), "listen": f"{self.address[0]}:{self.address[1]}"}

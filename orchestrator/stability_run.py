@@ -183,6 +183,7 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:
+    """Write the map points to stability.csv, atomically."""
     with atomic_path(path) as part, open(part, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(COLUMNS)
@@ -193,6 +194,7 @@ def write_csv(path: Path, rows: list[dict]) -> None:
 
 
 def read_csv(path: Path) -> list[dict]:
+    """Read the map points of a stability.csv."""
     with open(path) as fh:
         return [{"update": r["update"], "f_max_hz": float(r["f_max_hz"]),
                  "contact_stiffness_N_m": float(r["contact_stiffness_N_m"]), "delay_steps": int(r["delay_steps"]),

@@ -225,6 +225,7 @@ def _write_results(out: Path, rows: list[dict], columns: list[str]) -> None:
 
 def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers: int | None = None,
               progress: bool = True, log=print) -> dict:
+    """`pantohil sweep`: run the points of a sweep file on Dask, skip those done, write results."""
     sweep = load_sweep(sweep_path)
     definition, points = sweep["definition"], sweep["points"]
     out = Path(out)
