@@ -201,6 +201,7 @@ class Case:
 
     @property
     def compensates_rig_response(self) -> bool:
+        """Whether the rig file's response is compensated harmonic by harmonic (rig_compensation "response")."""
         return self.rig_spec is not None and self.rig_compensation == "response" and self.delay_compensation
 
     def rig_latency_steps(self) -> int:

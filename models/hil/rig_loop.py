@@ -24,6 +24,7 @@ LOOP_CONNECTIONS = 4
 
 @dataclass
 class LoopResult:
+    """Outcome of a loop run in process: status, spans, the last span's force [N] and the convergence history."""
     status: str  # "converged", "diverged" or "span_limit"
     spans: int
     force_N: np.ndarray  # the force the catenary uses over the last span (f_N of steady_span.csv)
@@ -42,6 +43,7 @@ def case_iteration(case: Case, delay_steps: int) -> PeriodicHil:
 
 
 def case_rig(case: Case):
+    """The rig of a case: the chain of its rig file if it names one, else the [rig] section's Rig."""
     r = case.values["rig"]
     if case.rig_spec is not None:
         return RigChain(case.rig_spec, case.dt_s, 0.0, 0.0, r["force_offset_N"], r["noise_std_N"], r["noise_seed"])

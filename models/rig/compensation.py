@@ -48,6 +48,7 @@ class HarmonicCompensation:
         return self._bcols[self.n - m: 2 * self.n - m]
 
     def force_matrix(self) -> np.ndarray:
+        """The force compensation as an N x N circulant matrix of its kernel."""
         idx = (np.arange(self.n)[:, None] - np.arange(self.n)[None, :]) % self.n
         return self.b[idx]
 

@@ -84,6 +84,7 @@ class RigSpec:
 
     @property
     def ramp_s(self) -> float:
+        """Duration of the drive's ramp to a new reference: as given, or N_com model steps [s]."""
         return self.height.ramp_s or self.height.decimation * self.model_step_s
 
 
@@ -193,15 +194,18 @@ class RigChain:
         return line.popleft()
 
     def height(self, z_command: float) -> float:
+        """Height path of one model step: delay, then the drive (interpolation, position loop, limits) [m]."""
         return self._drive.step(self._through(self._zdelay, z_command))
 
     def force(self, f_true: float) -> float:
+        """Force path of one model step: load-cell filter, delay, offset and noise [N]."""
         f = self._through(self._fdelay, self._filter(f_true)) + self.offset
         if self.noise > 0:
             f += float(self._rng.normal(0.0, self.noise))
         return f
 
     def step(self, z_command: float, f_true: float) -> tuple[float, float]:
+        """One model step of the rig: (actuator height, measured force)."""
         return self.height(z_command), self.force(f_true)
 
 

@@ -115,6 +115,7 @@ def _measured(resp: dict) -> MeasuredResponse | None:
 
 
 def rig_from_dict(raw: dict) -> RigSpec:
+    """Validate a parsed rig file into a RigSpec; RigFileError names the key at fault."""
     v = _validated(raw)
     r, h, f, lim = v["rig"], v["height"], v["force"], v["limits"]
     if not lim["stroke_min_m"] < lim["stroke_max_m"]:
@@ -133,6 +134,7 @@ def rig_from_dict(raw: dict) -> RigSpec:
 
 
 def load_rig_file(path: Path) -> RigSpec:
+    """Read and validate a rig file (TOML); RigFileError with one line on any fault."""
     try:
         raw = load_toml(Path(path), "rig file")
     except InputFileError as exc:
@@ -173,4 +175,5 @@ def rig_to_toml(spec: RigSpec, header: str = "") -> str:
 
 
 def with_measured(spec: RigSpec, measured: MeasuredResponse) -> RigSpec:
+    """The rig with a measured frequency response (from pantohil rig-identify) attached."""
     return replace(spec, measured=measured)
