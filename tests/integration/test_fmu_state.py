@@ -13,6 +13,7 @@ from conftest import pantohil
 ROLL_BACK = """
 import os, sys
 from pathlib import Path
+import numpy as np
 from pantohil.orchestrator.fmu_runtime import FmuInstance
 
 inst = FmuInstance("x", Path(sys.argv[1]))
