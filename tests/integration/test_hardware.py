@@ -288,7 +288,7 @@ class Intruder:
 
 @pytest.mark.slow
 def test_a_second_client_cannot_move_or_reset_the_rig(tmp_path):
-    # issue 15 acceptance 2: datagrams of another client during a hardware session are refused and
+    # datagrams of another client during a hardware session are refused and
     # counted, the actuator never moves for them, and the run's span equals an undisturbed run's
     emu = Emulator(tmp_path)
     try:

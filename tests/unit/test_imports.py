@@ -1,4 +1,4 @@
-"""The code's structure (issue 14): imports only go downward (orchestrator -> builder -> fmus -> models)
+"""The code's structure: imports only go downward (orchestrator -> builder -> fmus -> models)
 and no two modules import each other, directly or round a longer cycle. Read from the source with `ast`."""
 from __future__ import annotations
 
@@ -48,8 +48,7 @@ def _graph() -> dict[str, set[str]]:
     return {name: _imports(name, path, modules) for name, path in modules.items()}
 
 
-# orchestrator/hil_run.py is being split into stages by the "reliability" work (issue 14); until that
-# lands, run_report and hil_run import each other inside functions
+# run_report and hil_run import each other inside functions (a known cycle, listed here)
 PENDING_CYCLES = {frozenset({"pantohil.orchestrator.hil_run", "pantohil.orchestrator.run_report"})}
 
 
