@@ -1,0 +1,59 @@
+"""A plain `pip install .` (not editable) into a fresh virtual environment carries everything a user
+needs: from a folder outside the source tree, `pantohil run` of every shipped case and `pantohil catenary`
+of every shipped catenary file succeed. The operator cache of the test session (PANTOHIL_CACHE) is reused."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+from conftest import CASES_DIR, CATENARIES_DIR, ROOT
+
+CASES = sorted(p.name for p in CASES_DIR.glob("*.toml"))
+CATENARIES = sorted(p.name for p in CATENARIES_DIR.glob("*.toml"))
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory):
+    """The `pantohil` command of a fresh venv holding a non-editable install of this tree."""
+    venv = tmp_path_factory.mktemp("install") / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True)
+    proc = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "-q", "--no-deps", str(ROOT)],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return venv / "bin" / "pantohil"
+
+
+def _run(cmd, cwd):
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    return subprocess.run([str(c) for c in cmd], cwd=cwd, env=env, capture_output=True, text=True, timeout=3600)
+
+
+@pytest.mark.slow
+def test_the_installed_package_is_not_the_source_tree(installed, tmp_path):
+    proc = _run([installed.parent / "python", "-c", "import pantohil.models.data as d; print(d.DATA_DIR)"], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert not proc.stdout.strip().startswith(str(ROOT)), proc.stdout
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", CASES)
+def test_every_shipped_case_runs_from_another_folder(installed, tmp_path, name):
+    probe = _run([installed.parent / "python", "-c",
+                  "from pantohil.models.data import CASES_DIR; print(CASES_DIR)"], tmp_path)
+    case = probe.stdout.strip() + f"/{name}"
+    proc = _run([installed, "run", case, "--out", tmp_path / "run", "--quiet"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (tmp_path / "run" / "summary.json").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", CATENARIES)
+def test_every_shipped_catenary_file_builds_from_another_folder(installed, tmp_path, name):
+    probe = _run([installed.parent / "python", "-c",
+                  "from pantohil.models.data import CATENARIES_DIR; print(CATENARIES_DIR)"], tmp_path)
+    path = probe.stdout.strip() + f"/{name}"
+    proc = _run([installed, "catenary", path, "--out", tmp_path / "cat"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert (tmp_path / "cat" / "catenary.json").exists()
