@@ -36,8 +36,17 @@ VARIABLES = [
         0.1,
     ),
     Var("samples_per_span", "integer", "parameter", "1", "Samples per span N = L / (V dt)", 936, 2),
-    Var("rig_compensation", "integer", "parameter", "1", "0: delay advance D only; 1: also the rig's response at the kept "
-        "harmonics from resources/rig_response.csv (command = G_z^-1 z, force = G_f^-1 f_meas)", 0, 0, 1),
+    Var(
+        "rig_compensation",
+        "integer",
+        "parameter",
+        "1",
+        "0: delay advance D only; 1: also the rig's response at the kept "
+        "harmonics from resources/rig_response.csv (command = G_z^-1 z, force = G_f^-1 f_meas)",
+        0,
+        0,
+        1,
+    ),
     Var(
         "contact_force",
         "real",
@@ -133,7 +142,9 @@ class PantohilCatenary(PantohilSlave):
         """The rig's gains at harmonics 0..N_h-1 (harmonic,height_re,height_im,force_re,force_im)."""
         table = np.atleast_2d(np.loadtxt(Path(self.resources) / RIG_RESPONSE_FILE, delimiter=",", skiprows=1))
         if table.shape[0] != self.harmonics or not np.array_equal(table[:, 0], np.arange(self.harmonics)):
-            raise ValueError(f"{RIG_RESPONSE_FILE} has {table.shape[0]} harmonics; the parameters keep {self.harmonics}")
+            raise ValueError(
+                f"{RIG_RESPONSE_FILE} has {table.shape[0]} harmonics; the parameters keep {self.harmonics}"
+            )
         return HarmonicCompensation(n, table[:, 1] + 1j * table[:, 2], table[:, 3] + 1j * table[:, 4])
 
     def do_step(self, current_time, step_size):

@@ -259,7 +259,7 @@ def frequency_response(spec: RigSpec, dt_s: float, samples_per_span: int, n_harm
     shape = np.cos(np.outer(t, omega) + phase).sum(axis=1) / max(len(k), 1) ** 0.5 if len(k) else np.zeros(total)
     z_in, f_in = amplitude_m * shape, amplitude_N * shape
     chain = RigChain(spec, dt_s)
-    out = np.array([chain.step(z, f) for z, f in zip(z_in, f_in)])
+    out = np.array([chain.step(z, f) for z, f in zip(z_in, f_in, strict=False)])
     rec = slice(n, total)
     gz, gf = np.ones(n_harmonics, complex), np.ones(n_harmonics, complex)
     if len(k):

@@ -31,7 +31,13 @@ SCHEMA = {
         "decimation": (int, 1, lambda x: x >= 1, "must be >= 1", "N_com: one height of every N_com sent [-]"),
         "ramp_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "drive ramp, 0 = N_com dt [s]"),
         "sub_step_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "drive sub-reference period, 0 = none [s]"),
-        "servo_frequency_hz": (float, 0.0, lambda x: x >= 0, "must be >= 0", "position loop natural frequency, 0 = ideal [Hz]"),
+        "servo_frequency_hz": (
+            float,
+            0.0,
+            lambda x: x >= 0,
+            "must be >= 0",
+            "position loop natural frequency, 0 = ideal [Hz]",
+        ),
         "servo_damping": (float, 0.7, lambda x: x > 0, "must be > 0", "position loop damping ratio [-]"),
     },
     "force": {
@@ -43,7 +49,13 @@ SCHEMA = {
         "stroke_min_m": (float, -0.12, None, "", "lowest actuator position [m]"),
         "stroke_max_m": (float, 0.12, None, "", "highest actuator position [m]"),
         "max_velocity_m_s": (float, 5.4, lambda x: x > 0, "must be > 0", "motion-profile velocity limit [m/s]"),
-        "max_acceleration_m_s2": (float, 300.0, lambda x: x > 0, "must be > 0", "motion-profile acceleration limit [m/s^2]"),
+        "max_acceleration_m_s2": (
+            float,
+            300.0,
+            lambda x: x > 0,
+            "must be > 0",
+            "motion-profile acceleration limit [m/s^2]",
+        ),
     },
     "response": {
         "frequencies_hz": (list, None, None, "", "measured frequencies [Hz]"),
@@ -102,15 +114,22 @@ def _measured(resp: dict) -> MeasuredResponse | None:
         return None
     missing = [k for k in SCHEMA["response"] if k not in given]
     if missing:
-        raise RigFileError(f"response.{missing[0]}: missing (the response needs all of {', '.join(SCHEMA['response'])})")
+        raise RigFileError(
+            f"response.{missing[0]}: missing (the response needs all of {', '.join(SCHEMA['response'])})"
+        )
     n = len(given["frequencies_hz"])
     for key, vals in given.items():
         if len(vals) != n:
             raise RigFileError(f"response.{key}: {len(vals)} values for {n} frequencies")
     if any(g <= 0 for g in given["height_gain"] + given["force_gain"]):
         raise RigFileError("response: every gain must be > 0")
-    z = tuple(g * cmath.exp(1j * math.radians(p)) for g, p in zip(given["height_gain"], given["height_phase_deg"]))
-    f = tuple(g * cmath.exp(1j * math.radians(p)) for g, p in zip(given["force_gain"], given["force_phase_deg"]))
+    z = tuple(
+        g * cmath.exp(1j * math.radians(p))
+        for g, p in zip(given["height_gain"], given["height_phase_deg"], strict=False)
+    )
+    f = tuple(
+        g * cmath.exp(1j * math.radians(p)) for g, p in zip(given["force_gain"], given["force_phase_deg"], strict=False)
+    )
     return MeasuredResponse(tuple(given["frequencies_hz"]), z, f)
 
 
@@ -128,7 +147,9 @@ def rig_from_dict(raw: dict) -> RigSpec:
         raise RigFileError(f"height.ramp_s: {h['ramp_s']:g} s is longer than a reference period "
                            f"(N_com dt = {dt * h['decimation']:g} s): the ramp would not finish")
     if f["filter_hz"] >= 0.5 / dt:
-        raise RigFileError(f"force.filter_hz: {f['filter_hz']:g} Hz is at or above the Nyquist frequency {0.5 / dt:g} Hz")
+        raise RigFileError(
+            f"force.filter_hz: {f['filter_hz']:g} Hz is at or above the Nyquist frequency {0.5 / dt:g} Hz"
+        )
     return RigSpec(r["name"], dt, HeightPath(**h), ForcePath(**f), ActuatorLimits(**lim), r["stated_delay_s"],
                    r["description"], _measured(v["response"]))
 
@@ -165,8 +186,10 @@ def rig_to_toml(spec: RigSpec, header: str = "") -> str:
     if m is not None:
         sections["response"] = {
             "frequencies_hz": [float(f) for f in m.frequencies_hz],
-            "height_gain": [abs(g) for g in m.height], "height_phase_deg": [math.degrees(cmath.phase(g)) for g in m.height],
-            "force_gain": [abs(g) for g in m.force], "force_phase_deg": [math.degrees(cmath.phase(g)) for g in m.force],
+            "height_gain": [abs(g) for g in m.height],
+            "height_phase_deg": [math.degrees(cmath.phase(g)) for g in m.height],
+            "force_gain": [abs(g) for g in m.force],
+            "force_phase_deg": [math.degrees(cmath.phase(g)) for g in m.force],
         }
     lines = [f"# {line}" for line in header.splitlines()]
     for name, keys in sections.items():

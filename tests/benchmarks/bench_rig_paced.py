@@ -63,13 +63,27 @@ def one_run(tmp: Path, args, drift_ppm: float, i: int, virtual: np.ndarray, span
     s = json.loads((out / "summary.json").read_text())
     rig = json.loads(stats_path.read_text())["session_log"][-1]
     ln = s["link"]
-    row = {"exit": proc.returncode, "status": s["status"], "spans": s["spans"], "steps": int(round(s["timing"]["simulated_s"] / s["dt_s"])),
-           "rig_samples": rig["samples"], "consumed": ln["samples"], "answered": ln["answered"],
-           "rig_answered": rig["answered"], "unanswered": rig["unanswered"], "doubled": rig["doubled"],
-           "lost": ln["lost"], "reused": rig["reused"], "reused_pct": 100.0 * rig["reused"] / max(rig["samples"], 1),
-           "answer_us": ln["answer_us"], "rig_answer_us": rig["answer_us"], "tick_late_us": rig["tick_lateness_us"],
-           "difference_pct": 100.0 * span_difference(out, virtual) if s["spans"] else float("nan"),
-           "load": (load_before, load_after), "scheduling": ln.get("scheduling")}
+    row = {
+        "exit": proc.returncode,
+        "status": s["status"],
+        "spans": s["spans"],
+        "steps": int(round(s["timing"]["simulated_s"] / s["dt_s"])),
+        "rig_samples": rig["samples"],
+        "consumed": ln["samples"],
+        "answered": ln["answered"],
+        "rig_answered": rig["answered"],
+        "unanswered": rig["unanswered"],
+        "doubled": rig["doubled"],
+        "lost": ln["lost"],
+        "reused": rig["reused"],
+        "reused_pct": 100.0 * rig["reused"] / max(rig["samples"], 1),
+        "answer_us": ln["answer_us"],
+        "rig_answer_us": rig["answer_us"],
+        "tick_late_us": rig["tick_lateness_us"],
+        "difference_pct": 100.0 * span_difference(out, virtual) if s["spans"] else float("nan"),
+        "load": (load_before, load_after),
+        "scheduling": ln.get("scheduling"),
+    }
     print(f"drift {drift_ppm:+g} ppm, run {i}: exit {row['exit']}, {row['status']}, {row['spans']} spans "
           f"({row['steps']} steps); rig sent {row['rig_samples']} samples, the model consumed {row['consumed']} and "
           f"answered {row['answered']} (rig received {row['rig_answered']}), never answered {row['unanswered']}, "

@@ -100,7 +100,7 @@ def main() -> None:
         emu.terminate()
         emu.wait()
         if follower is not None:
-            for topic, log_ns, _ in follower.poll():
+            for topic, _log_ns, _ in follower.poll():
                 counts[topic] += 1
         print(stdout.strip())
         print(stderr.strip()[-2000:])
