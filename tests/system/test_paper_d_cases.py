@@ -13,7 +13,8 @@ import pytest
 from conftest import CASES_DIR, load_run, pantohil
 from pantohil.models.metrics import lowpass_periodic
 
-CASES = sorted(p.stem for p in CASES_DIR.glob("paper_d_*.toml") if "stability" not in p.stem)
+CASES = [f"paper_d_{kind}_{v}" for kind in ("stitched", "simple", "mass_stitched") for v in (250, 300)]
+CASES.append("paper_d_mass_stitched_300_plus160")
 
 
 def _radius(case: str, out) -> float:
