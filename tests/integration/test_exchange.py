@@ -142,7 +142,7 @@ def test_ssp_carries_omsimulators_annotation_and_parameter_units(tmp_path):
     master = ssd.find(f".//{{{OMS}}}SimulationInformation/{{{OMS}}}FixedStepMaster")
     assert master is not None and master.get("description") == "oms-ma" and float(master.get("stepSize")) == 0.001
     values = {p.get("name"): p[0] for p in ssv.iter(f"{{{SSV}}}Parameter")}
-    assert values["catenary.speed"].get("unit") == "m/s" and values["pantograph.uplift_force"].get("unit") == "N"
+    assert values["catenary.speed"].get("unit") == "m/s" and values["pantograph.uplift_force_N"].get("unit") == "N"
     delay = values["catenary.delay_steps"]
     assert delay.tag == f"{{{SSV}}}Integer" and delay.get("unit") is None
     used = {v.get("unit") for v in values.values() if v.get("unit")}
