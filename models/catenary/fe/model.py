@@ -80,6 +80,26 @@ class Section:
         return i
 
 
+def _locate_droppers(cat: CatenaryDefinition, n_spans: int, x: np.ndarray, cw: np.ndarray, mw: np.ndarray,
+                     stitch_x: list, stitch_w: list) -> list:
+    """(x, contact-wire dof, upper dof, on the stitch wire) of every dropper of the section: a dropper
+    within a stitch wire's reach of an interior support hangs from that stitch wire."""
+    L = cat.span_m
+    droppers = []
+    for j in range(n_spans):
+        for xd in cat.dropper_positions_m:
+            xg = j * L + xd
+            i = int(np.argmin(np.abs(x - xg)))
+            upper, on_stitch = mw[i], False
+            if cat.on_stitch(xd):
+                seg = j if xd > L / 2 else j - 1  # the stitch wire of support j+1 or j (interior only)
+                if 0 <= seg < len(stitch_x):
+                    s = int(np.argmin(np.abs(stitch_x[seg] - xg)))
+                    upper, on_stitch = stitch_w[seg][s], True
+            droppers.append((xg, cw[i], upper, on_stitch))
+    return droppers
+
+
 def build_section(cat: CatenaryDefinition, n_spans: int, extra_keys: tuple = (),
                   window_m: tuple[float, float] | None = None) -> Section:
     """Mesh and wire matrices of n equal spans (anchored ends), with droppers and supports located.
@@ -126,18 +146,7 @@ def build_section(cat: CatenaryDefinition, n_spans: int, extra_keys: tuple = (),
         add_chain(xs, wd, cat.stitch)
     K = sparse.csr_matrix((kv, (rows, cols)), shape=(ndof, ndof))
     M = sparse.csr_matrix((mv, (rows, cols)), shape=(ndof, ndof))
-    droppers = []
-    for j in range(n_spans):
-        for xd in cat.dropper_positions_m:
-            xg = j * L + xd
-            i = int(np.argmin(np.abs(x - xg)))
-            upper, on_stitch = mw[i], False
-            if cat.on_stitch(xd):
-                seg = j if xd > L / 2 else j - 1  # the stitch wire of support j+1 or j (interior only)
-                if 0 <= seg < len(stitch_x):
-                    s = int(np.argmin(np.abs(stitch_x[seg] - xg)))
-                    upper, on_stitch = stitch_w[seg][s], True
-            droppers.append((xg, cw[i], upper, on_stitch))
+    droppers = _locate_droppers(cat, n_spans, x, cw, mw, stitch_x, stitch_w)
     supports = [(j * L, cw[int(np.argmin(np.abs(x - j * L)))], mw[int(np.argmin(np.abs(x - j * L)))])
                 for j in range(n_spans + 1)]
     return Section(cat, n_spans, x, stitch_x, ndof, cw, mw, stitch_w, K, M, f, droppers, supports)

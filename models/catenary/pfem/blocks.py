@@ -106,6 +106,31 @@ def string_block(cat: AsmParameters, span_m: float, n_elements: int) -> ContactB
     return ContactBlock(blk, lambda x: linear_shapes(nodes, x, n, np.arange(n)), z0=lambda x: np.zeros_like(x))
 
 
+def _dropper_and_support_terms(cat: CatenaryDefinition, ndof: int, lower, upper, kd: np.ndarray,
+                               dropper_mass_kg: np.ndarray, cw_support: int, mw_support: int):
+    """What a block adds to its wires' matrices (Paper C sec. 2): each dropper as a bar of stiffness k_d
+    between its ends, the steady arm on the contact wire and an elastic messenger support at the block's
+    one support; lumped at the dropper ends half the dropper's mass and the clamps, and the arm's mass.
+    Returns the stiffness terms (sparse) and the lumped masses (per dof)."""
+    r, c, v = [], [], []
+    for lo, hi, k in zip(lower, upper, kd, strict=True):
+        r += [lo, lo, hi, hi]
+        c += [lo, hi, lo, hi]
+        v += [k, -k, -k, k]
+    r.append(cw_support)
+    c.append(cw_support)
+    v.append(cat.steady_arm_stiffness_N_m)
+    if cat.messenger_support_stiffness_N_m > 0:
+        r.append(mw_support)
+        c.append(mw_support)
+        v.append(cat.messenger_support_stiffness_N_m)
+    lump = np.zeros(ndof)
+    np.add.at(lump, lower, dropper_mass_kg + cat.clamp_mass_contact_kg)
+    np.add.at(lump, upper, dropper_mass_kg + cat.clamp_mass_messenger_kg)
+    lump[cw_support] += cat.steady_arm_mass_kg
+    return sparse.csr_matrix((v, (r, c)), shape=(ndof, ndof)), lump
+
+
 def catenary_block(cat: CatenaryDefinition) -> ContactBlock:
     """One span of a catenary file as a periodic block (Paper C sec. 2, Fig. 2), linearised about the
     form-found static state of the central span of three: wires as tensioned beams, droppers as bars,
@@ -122,27 +147,11 @@ def catenary_block(cat: CatenaryDefinition) -> ContactBlock:
     kd = cat.dropper_axial_stiffness_N / lengths
     g = [d[1] for d in sec.droppers]
     up = [d[2] for d in sec.droppers]
-    r, c, v = [], [], []
-    for a, b, k in zip(g, up, kd, strict=False):
-        r += [a, a, b, b]
-        c += [a, b, a, b]
-        v += [k, -k, -k, k]
     cw0, mw0 = sec.cw_w[0], sec.mw_w[0]
     cwN, mwN = sec.cw_w[-1], sec.mw_w[-1]
-    r.append(cw0)
-    c.append(cw0)
-    v.append(cat.steady_arm_stiffness_N_m)
+    K_extra, lump = _dropper_and_support_terms(cat, sec.ndof, g, up, kd, cat.dropper_mass_kg_m * lengths / 2, cw0, mw0)
     elastic = cat.messenger_support_stiffness_N_m > 0
-    if elastic:
-        r.append(mw0)
-        c.append(mw0)
-        v.append(cat.messenger_support_stiffness_N_m)
-    K = sec.K_wires + sparse.csr_matrix((v, (r, c)), shape=sec.K_wires.shape)
-    lump = np.zeros(sec.ndof)
-    dm = cat.dropper_mass_kg_m * lengths / 2
-    np.add.at(lump, g, dm + cat.clamp_mass_contact_kg)
-    np.add.at(lump, up, dm + cat.clamp_mass_messenger_kg)
-    lump[cw0] += cat.steady_arm_mass_kg
+    K = sec.K_wires + K_extra
     M = sec.M_wires + sparse.diags(lump)
     keep = np.ones(sec.ndof, dtype=bool)
     if not elastic:
@@ -212,29 +221,13 @@ def shifted_catenary_block(cat: CatenaryDefinition, origin_m: float) -> ContactB
     up = np.array([d[2] for _, d in in_block])
     kd = cat.dropper_axial_stiffness_N / lengths[span_index]
     n_all = sec.ndof
-    r, c, v = [], [], []
-    for lo, hi, k in zip(g, up, kd, strict=True):
-        r += [lo, lo, hi, hi]
-        c += [lo, hi, lo, hi]
-        v += [k, -k, -k, k]
     support = sec.node(L)
     cw_s, mw_s = sec.cw_w[support], sec.mw_w[support]
-    r.append(cw_s)
-    c.append(cw_s)
-    v.append(cat.steady_arm_stiffness_N_m)
-    elastic = cat.messenger_support_stiffness_N_m > 0
-    if elastic:
-        r.append(mw_s)
-        c.append(mw_s)
-        v.append(cat.messenger_support_stiffness_N_m)
-    else:
+    K_extra, lump = _dropper_and_support_terms(cat, n_all, g, up, kd, cat.dropper_mass_kg_m * lengths[span_index] / 2,
+                                               cw_s, mw_s)
+    if cat.messenger_support_stiffness_N_m <= 0:
         dofs = dofs[dofs != mw_s]  # messenger held at the support
-    K = sec.K_wires + sparse.csr_matrix((v, (r, c)), shape=(n_all, n_all))
-    lump = np.zeros(n_all)
-    dm = cat.dropper_mass_kg_m * lengths[span_index] / 2
-    np.add.at(lump, g, dm + cat.clamp_mass_contact_kg)
-    np.add.at(lump, up, dm + cat.clamp_mass_messenger_kg)
-    lump[cw_s] += cat.steady_arm_mass_kg
+    K = sec.K_wires + K_extra
     M = sec.M_wires + sparse.diags(lump)
     idx = np.sort(dofs)
     new = -np.ones(n_all, dtype=int)
