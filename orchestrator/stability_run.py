@@ -106,6 +106,51 @@ def stability_row(task: dict) -> list[dict]:
     return rows
 
 
+def _frequency_and_stiffness_axes(case: Case, f_max_hz: np.ndarray | None,
+                                  contact_stiffness_N_m: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The f_max and contact-stiffness axes of the map (the case's values if not given), checked positive."""
+    f_values = np.array([case.values["hil"]["max_frequency_hz"]] if f_max_hz is None else f_max_hz, dtype=float)
+    k_values = np.array([case.pantograph.contact_stiffness_N_m] if contact_stiffness_N_m is None
+                        else contact_stiffness_N_m, dtype=float)
+    if np.any(f_values <= 0):
+        raise CaseError(f"f_max: frequencies must be > 0 Hz (got {f_values.min():g} Hz)")
+    if np.any(k_values <= 0):
+        raise CaseError(f"contact stiffness: must be > 0 N/m (got {k_values.min():g} N/m)")
+    return f_values, k_values
+
+
+def _delay_latency_pairs(case: Case, delay_steps: np.ndarray | None) -> list[tuple[int, int]]:
+    """The (delay, latency) pairs of the map: the case's own without --delay, else each D compensating D."""
+    plan = delay_plan(case)
+    if delay_steps is None:
+        pairs = [(plan["delay_steps"], plan["loop_latency_steps"] + plan["rig_latency_steps"])]
+    else:
+        d_values = np.asarray(delay_steps)
+        if np.any(d_values < 1) or np.any(d_values >= case.samples_per_span):
+            raise CaseError(f"delay: must lie in 1..{case.samples_per_span - 1} steps (got {d_values.min()} to "
+                            f"{d_values.max()})")
+        pairs = [(int(d), int(d)) for d in d_values]
+    return pairs
+
+
+def _map_summary(case: Case, update: str, rows: list[dict], tasks: list[dict], n_workers: int,
+                 scheduler: str | None, errors: list[str], relaxation: float | None, t_map: float, t0: float,
+                 figures) -> dict:
+    """The map's summary.json content: counts, stable points, lowest spectral radius and timing."""
+    rho = np.array([r["spectral_radius"] for r in rows])
+    return {
+        "case": case.name, "update": update, "points": len(rows), "tasks": len(tasks), "workers": n_workers,
+        "scheduler": scheduler or "LocalCluster", "failed_rows": errors,
+        "stable_points": int(np.sum(rho < 1)), "min_spectral_radius": float(rho.min()) if len(rho) else None,
+        "contact_frequency_hz_at_case_kc": float(contact_frequency_hz(case.pantograph,
+                                                                      case.pantograph.contact_stiffness_N_m)),
+        "relaxation": "best found" if relaxation is None else relaxation,
+        "timing": {"map_s": t_map, "wall_s": time.perf_counter() - t0,
+                   "per_point_s": t_map / max(len(rows), 1) * max(n_workers, 1)},
+        "figures": figures,
+    }
+
+
 def run_stability(case_path: Path | None, overrides: list[str], out: Path, update: str | None = None,
                   f_max_hz: np.ndarray | None = None, contact_stiffness_N_m: np.ndarray | None = None,
                   delay_steps: np.ndarray | None = None, relaxation: float | None = None,
@@ -118,22 +163,8 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
         raise CaseError(f"update: must be step or span (got {update!r})")
     if relaxation is not None and not 0 < relaxation < 2:
         raise CaseError(f"relaxation: must lie in (0, 2) (got {relaxation:g})")
-    f_values = np.array([case.values["hil"]["max_frequency_hz"]] if f_max_hz is None else f_max_hz, dtype=float)
-    k_values = np.array([case.pantograph.contact_stiffness_N_m] if contact_stiffness_N_m is None
-                        else contact_stiffness_N_m, dtype=float)
-    if np.any(f_values <= 0):
-        raise CaseError(f"f_max: frequencies must be > 0 Hz (got {f_values.min():g} Hz)")
-    if np.any(k_values <= 0):
-        raise CaseError(f"contact stiffness: must be > 0 N/m (got {k_values.min():g} N/m)")
-    plan = delay_plan(case)
-    if delay_steps is None:
-        pairs = [(plan["delay_steps"], plan["loop_latency_steps"] + plan["rig_latency_steps"])]
-    else:
-        d_values = np.asarray(delay_steps)
-        if np.any(d_values < 1) or np.any(d_values >= case.samples_per_span):
-            raise CaseError(f"delay: must lie in 1..{case.samples_per_span - 1} steps (got {d_values.min()} to "
-                            f"{d_values.max()})")
-        pairs = [(int(d), int(d)) for d in d_values]
+    f_values, k_values = _frequency_and_stiffness_axes(case, f_max_hz, contact_stiffness_N_m)
+    pairs = _delay_latency_pairs(case, delay_steps)
     points = len(pairs) * len(f_values) * len(k_values)
     if points > MAX_MAP_POINTS:
         raise CaseError(f"stability map: {points} points, above the limit of {MAX_MAP_POINTS} points")
@@ -164,18 +195,7 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
     from .report import plot_stability_maps
 
     figures = plot_stability_maps(out, rows, case.pantograph, update, case.name)
-    rho = np.array([r["spectral_radius"] for r in rows])
-    summary = {
-        "case": case.name, "update": update, "points": len(rows), "tasks": len(tasks), "workers": n_workers,
-        "scheduler": scheduler or "LocalCluster", "failed_rows": errors,
-        "stable_points": int(np.sum(rho < 1)), "min_spectral_radius": float(rho.min()) if len(rho) else None,
-        "contact_frequency_hz_at_case_kc": float(contact_frequency_hz(case.pantograph,
-                                                                      case.pantograph.contact_stiffness_N_m)),
-        "relaxation": "best found" if relaxation is None else relaxation,
-        "timing": {"map_s": t_map, "wall_s": time.perf_counter() - t0,
-                   "per_point_s": t_map / max(len(rows), 1) * max(n_workers, 1)},
-        "figures": figures,
-    }
+    summary = _map_summary(case, update, rows, tasks, n_workers, scheduler, errors, relaxation, t_map, t0, figures)
     write_json_atomic(out / "summary.json", summary)
     if errors:
         raise RuntimeError(f"{len(errors)} map rows failed; first: {errors[0]}")
