@@ -28,14 +28,12 @@ from pantohil.builder.system import (
     loop_latency_steps,
 )
 from pantohil.models.case import Case, CaseError
-from pantohil.models.catenary.asm.closed_form import (
-    one_sided_harmonics,
-    single_pantograph,
-)
 from pantohil.models.hil.loop import ConvergenceMonitor
 from tqdm import tqdm
 
 from . import checkpoint
+from .case_reference import case_dropper_positions
+from .case_reference import closed_form_reference as closed_form_reference  # re-exported (tests, callers)
 from .master import JacobiMaster
 from .pacing import Pacer, set_realtime_priority
 from .recorder import McapRecorder
@@ -187,21 +185,6 @@ def delay_plan(case: Case, topology: Topology = VIRTUAL) -> dict:
     return {"delay_steps": d, "loop_latency_steps": loop, "rig_latency_steps": case.rig_latency_steps(),
             "rig_compensation": "response" if case.compensates_rig_response else "delay",
             "steady_state_period_spans": case.rig_period_spans()}
-
-
-def closed_form_reference(case: Case):
-    """The ASM closed-form steady force with the run's harmonic content (Paper A eqs. 38-41)."""
-    z0 = case.z0_samples()
-    ss = single_pantograph(case.catenary, case.pantograph, case.speed_m_s, case.span_m, one_sided_harmonics(z0),
-                           case.pantograph.uplift_force_N, case.n_harmonics)
-    return ss.force_series(case.samples_per_span)
-
-
-def case_dropper_positions(case: Case) -> list:
-    """Dropper positions of the case's catenary file within a span [m]."""
-    from pantohil.models.catenary.fe.definition import load_definition
-
-    return [float(x) for x in load_definition(case.definition_path).dropper_positions_m]
 
 
 def run_topology(case: Case, options: RunOptions) -> Topology:

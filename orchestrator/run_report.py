@@ -10,6 +10,7 @@ from pantohil.models.case import Case
 from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
 
 from . import report
+from .case_reference import case_dropper_positions, closed_form_reference
 from .run_summary import ForceStatistics, RunSummary, Timing
 
 FILTER_HZ = 20.0
@@ -45,8 +46,6 @@ def _statistics(f: np.ndarray, filtered: np.ndarray) -> ForceStatistics:
 
 def _reference(case: Case, f: np.ndarray):
     """The closed form of an ASM case (Paper A eqs. 38-41) and the run's RMS distance to it."""
-    from .hil_run import closed_form_reference
-
     ref = closed_form_reference(case)
     err = rms((f - f.mean()) - (ref - ref.mean()))
     f25, r25 = lowpass_periodic(f, case.dt_s, 25.0), lowpass_periodic(ref, case.dt_s, 25.0)  # Paper B sec. 5.1
@@ -69,8 +68,6 @@ def _rig_summary(case: Case) -> dict:
 
 
 def _droppers(state, start: int, stop: int, plots: bool) -> dict:
-    from .hil_run import case_dropper_positions
-
     case, master, out_dir = state.case, state.master, state.prepared.out_dir
     n, dt = case.samples_per_span, case.dt_s
     positions = case_dropper_positions(case)
