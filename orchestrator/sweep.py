@@ -223,6 +223,23 @@ def _write_results(out: Path, rows: list[dict], columns: list[str]) -> None:
         frame.to_parquet(part, index=False)
 
 
+def _check_same_sweep(marker: Path, out: Path, definition: dict) -> None:
+    """Refuse a sweep folder whose sweep.json holds another sweep (a different hash)."""
+    if marker.exists():
+        previous = json.loads(marker.read_text())
+        if previous.get("hash") != definition["hash"]:
+            raise CaseError(f"sweep folder {out} holds the results of another sweep ({previous.get('name')}); "
+                            "use a new folder")
+
+
+def _status_counts(rows: list[dict]) -> dict:
+    """How many result rows have each status, in the order the statuses first appear."""
+    statuses = {}
+    for r in rows:
+        statuses[r["status"]] = statuses.get(r["status"], 0) + 1
+    return statuses
+
+
 def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers: int | None = None,
               progress: bool = True, log=print) -> dict:
     """`pantohil sweep`: run the points of a sweep file on Dask, skip those done, write results."""
@@ -230,11 +247,7 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
     definition, points = sweep["definition"], sweep["points"]
     out = Path(out)
     marker = out / "sweep.json"
-    if marker.exists():
-        previous = json.loads(marker.read_text())
-        if previous.get("hash") != definition["hash"]:
-            raise CaseError(f"sweep folder {out} holds the results of another sweep ({previous.get('name')}); "
-                            "use a new folder")
+    _check_same_sweep(marker, out, definition)
     grid_keys = list(definition["grid"])
     columns = ["point"] + grid_keys + list(STATS)
     existing = {r["point"]: r for r in _read_results(out / "results.csv")}
@@ -273,9 +286,7 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
     if rows:
         _write_results(out, rows, columns)
     figures = plot_sweep(out, rows, definition) if rows else []
-    statuses = {}
-    for r in rows:
-        statuses[r["status"]] = statuses.get(r["status"], 0) + 1
+    statuses = _status_counts(rows)
     summary = {"name": definition["name"], "kind": definition["kind"], "points": len(points),
                "skipped_done": len(done), "ran": len(rows) - len(done), "statuses": statuses,
                "workers": n_workers, "scheduler": scheduler or "LocalCluster", "wall_s": wall,

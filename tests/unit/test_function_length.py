@@ -17,7 +17,6 @@ PENDING_SPLIT = {
     "builder/partner/run_fmpy.py::main",
     "orchestrator/cli.py::_cmd_run",
     "orchestrator/fem_sim.py::run_fem_sim",
-    "orchestrator/sweep.py::run_sweep",
 }
 
 
