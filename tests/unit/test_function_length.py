@@ -15,7 +15,6 @@ PENDING_SPLIT = {
     "models/catenary/fe/simulation.py::integrate_section",
     "models/catenary/pfem/operators.py::build_operators",
     "builder/partner/run_fmpy.py::main",
-    "orchestrator/cli.py::_cmd_run",
     "orchestrator/fem_sim.py::run_fem_sim",
 }
 
