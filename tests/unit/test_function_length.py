@@ -14,7 +14,6 @@ DECLARATIVE: set[str] = set()
 PENDING_SPLIT = {
     "models/catenary/fe/simulation.py::integrate_section",
     "models/catenary/pfem/operators.py::build_operators",
-    "builder/partner/run_fmpy.py::main",
     "orchestrator/fem_sim.py::run_fem_sim",
 }
 
