@@ -132,14 +132,52 @@ def operator_grid(s: PfemSettings, alpha: float, beta: float) -> tuple[np.ndarra
     return graded_grid(alpha, beta, s.omega_max, s.resolution, s.max_step_rad_s, s.dt_s)
 
 
-def build_operators(cb: ContactBlock, s: PfemSettings, progress=None, chunk: int = 300) -> PfemOperators:
-    """All operators of a block at one speed and step (Paper C eqs. 19-33, Paper D eqs. 11-12)."""
-    t_start = time.perf_counter()
+@dataclass(frozen=True)
+class _BuildContext:
+    """The fixed quantities of one operator build: model, functionals, windows, lags and contact harmonics."""
+
+    fim: FixedInterfaceModel
+    psi_c: np.ndarray
+    phi_c: np.ndarray
+    psi_e: np.ndarray
+    phi_e: np.ndarray
+    win: np.ndarray
+    n: int
+    nd: int
+    nB: int
+    r: int
+    dt: float
+    ii: np.ndarray
+    lag0: int
+    lags: np.ndarray
+    E_c: np.ndarray
+    rows_c: int
+    t_win: np.ndarray
+
+
+@dataclass
+class _FrequencySums:
+    """The sums over the frequency grid that the chunks accumulate (modal lag functions, boundary parts)."""
+
+    G: np.ndarray  # fixed-interface modal lag functions g_p(m)
+    H2: np.ndarray  # boundary part: contact harmonics x contact load
+    H2_dc: np.ndarray  # boundary part: elongation at window index i x contact load
+    H2_cd: np.ndarray  # contact harmonics x dropper load lag
+    dd_lag: np.ndarray
+
+    @classmethod
+    def zeros(cls, ctx: _BuildContext) -> _FrequencySums:
+        """All sums at zero, sized for the build."""
+        nd, n, rows_c, n_lags = ctx.nd, ctx.n, ctx.rows_c, len(ctx.lags)
+        return cls(np.zeros((ctx.r, n_lags)), np.zeros((rows_c, n), dtype=complex),
+                   np.zeros((nd, n, n), dtype=complex), np.zeros((nd, rows_c, n_lags), dtype=complex),
+                   np.zeros((nd, nd, n_lags)))
+
+
+def _build_context(cb: ContactBlock, s: PfemSettings, period: float,
+                   J: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, _BuildContext]:
+    """Frequency grid and tapered weights, contact samples and the fixed quantities of the build."""
     n, dt = s.samples_per_span, s.dt_s
-    period = n * dt
-    if abs(period * s.speed_m_s - cb.block.length_m) > 1e-6 * cb.block.length_m:
-        raise ValueError("samples_per_span x dt x speed must equal the block length")
-    J, Jd = s.n_harmonics, s.n_harmonics_dropper
     omega, w = operator_grid(s, cb.block.alpha, cb.block.beta)
     w = w * spectral_taper(omega, s.omega_max, s.taper)
     fim = FixedInterfaceModel.build(cb.block, period)
@@ -159,68 +197,105 @@ def build_operators(cb: ContactBlock, s: PfemSettings, progress=None, chunk: int
     lags = np.arange(-lag0, lag0 + 1)
     jc = np.arange(-(J - 1), J)
     E_c = np.exp(-2j * np.pi * np.outer(jc, ii) / n)
-    rows_c = len(jc)
-    G = np.zeros((r, len(lags)))  # fixed-interface modal lag functions g_p(m)
-    H2 = np.zeros((rows_c, n), dtype=complex)  # boundary part: contact harmonics x contact load
-    H2_dc = np.zeros((nd, n, n), dtype=complex)  # boundary part: elongation at window index i x contact load
-    H2_cd = np.zeros((nd, rows_c, len(lags)), dtype=complex)  # contact harmonics x dropper load lag
-    dd_lag = np.zeros((nd, nd, len(lags)))
     t_win = (win[:, None] + ii[None, :]) * dt  # [d, i] instants of each window
-    for k0 in range(0, len(omega), chunk):
-        om = omega[k0:k0 + chunk]
-        wk = w[k0:k0 + chunk]
-        kc = len(om)
-        c, dp, S, P = fim.coefficients(om)
-        B = np.exp(1j * np.outer(om, lags * dt))  # [k, lag]
-        G += np.real((wk[:, None] / dp).T @ B)
-        Q = np.ascontiguousarray(
-            ((c[:, None] / dp)[:, :, None] * fim.M_qB[None]).transpose(1, 0, 2).reshape(r, kc * nB)
-        )
-        Xi_c = psi_c[:, None, :] - _real_times_complex(phi_c, Q).reshape(n, kc, nB)  # [n, k, B]
-        ph = B[:, lag0:lag0 + n].T  # exp(i w_k n dt) [n, k]
-        A_c = (E_c @ (ph[:, :, None] * Xi_c).reshape(n, kc * nB)).reshape(rows_c, kc, nB)
-        Xi_e = psi_e[:, None, :] - _real_times_complex(phi_e, Q).reshape(nd, kc, nB)  # [d, k, B]
-        A = np.concatenate([A_c, Xi_e]) if nd else A_c  # output functionals: contact harmonics, elongations
-        PTA = np.einsum("kbr,xkb->krx", P, A)
-        V = np.linalg.solve(np.transpose(S, (0, 2, 1)), PTA)  # S^-T P^T A
-        U = (np.conj(P) @ V) * wk[:, None, None]  # [k, B, row]
-        Yc = np.conj(ph)[:, :, None] * Xi_c  # a unit load at contact point n_hat at its instant
-        H2 += U[:, :, :rows_c].transpose(2, 0, 1).reshape(rows_c, kc * nB) @ Yc.reshape(n, kc * nB).T
-        if nd:
-            Md = np.einsum("kbd,nkb->dkn", U[:, :, rows_c:], Yc)  # [d, k, n_hat]
-            for d in range(nd):
-                H2_dc[d] += np.exp(1j * np.outer(t_win[d], om)) @ Md[d]  # [i, n_hat]
-            s_cd = -np.einsum("kbj,dkb->djk", U[:, :, :rows_c], Xi_e)  # load = -elongation functional
-            H2_cd += (s_cd.reshape(-1, kc) @ np.conj(B)).reshape(nd, rows_c, len(lags))  # exp(-i w t' dt)
-            modal = np.einsum("dp,kp,ep->kde", phi_e, 1.0 / dp, phi_e)
-            XP = np.einsum("dkb,kbr->kdr", Xi_e, P)
-            PX = np.einsum("kbr,dkb->krd", np.conj(P), Xi_e)
-            I_dd = -(modal + XP @ np.linalg.solve(S, PX))  # [k, observed, loaded]
-            dd_lag += np.real(np.einsum("k,kde,km->dem", wk, I_dd, B))
-        if progress is not None:
-            progress(min(k0 + kc, len(omega)), len(omega))
+    ctx = _BuildContext(fim, psi_c, phi_c, psi_e, phi_e, win, n, nd, nB, r, dt, ii, lag0, lags, E_c, len(jc), t_win)
+    return omega, w, x, ctx
+
+
+def _accumulate_dropper_chunk(ctx: _BuildContext, acc: _FrequencySums, om: np.ndarray, wk: np.ndarray,
+                              B: np.ndarray, dp: np.ndarray, S: np.ndarray, P: np.ndarray, U: np.ndarray,
+                              Yc: np.ndarray, Xi_e: np.ndarray) -> None:
+    """Add one chunk of frequencies to the dropper sums (contact-to-dropper, dropper-to-contact, dropper-to-dropper)."""
+    nd, rows_c, kc, phi_e = ctx.nd, ctx.rows_c, len(om), ctx.phi_e
+    Md = np.einsum("kbd,nkb->dkn", U[:, :, rows_c:], Yc)  # [d, k, n_hat]
+    for d in range(nd):
+        acc.H2_dc[d] += np.exp(1j * np.outer(ctx.t_win[d], om)) @ Md[d]  # [i, n_hat]
+    s_cd = -np.einsum("kbj,dkb->djk", U[:, :, :rows_c], Xi_e)  # load = -elongation functional
+    acc.H2_cd += (s_cd.reshape(-1, kc) @ np.conj(B)).reshape(nd, rows_c, len(ctx.lags))  # exp(-i w t' dt)
+    modal = np.einsum("dp,kp,ep->kde", phi_e, 1.0 / dp, phi_e)
+    XP = np.einsum("dkb,kbr->kdr", Xi_e, P)
+    PX = np.einsum("kbr,dkb->krd", np.conj(P), Xi_e)
+    I_dd = -(modal + XP @ np.linalg.solve(S, PX))  # [k, observed, loaded]
+    acc.dd_lag += np.real(np.einsum("k,kde,km->dem", wk, I_dd, B))
+
+
+def _accumulate_chunk(ctx: _BuildContext, acc: _FrequencySums, om: np.ndarray, wk: np.ndarray) -> None:
+    """Add one chunk of frequencies (eq. 19) to the modal lag functions and the boundary-part sums."""
+    n, nd, nB, r, dt, lag0, rows_c, fim = ctx.n, ctx.nd, ctx.nB, ctx.r, ctx.dt, ctx.lag0, ctx.rows_c, ctx.fim
+    kc = len(om)
+    c, dp, S, P = fim.coefficients(om)
+    B = np.exp(1j * np.outer(om, ctx.lags * dt))  # [k, lag]
+    acc.G += np.real((wk[:, None] / dp).T @ B)
+    Q = np.ascontiguousarray(
+        ((c[:, None] / dp)[:, :, None] * fim.M_qB[None]).transpose(1, 0, 2).reshape(r, kc * nB)
+    )
+    Xi_c = ctx.psi_c[:, None, :] - _real_times_complex(ctx.phi_c, Q).reshape(n, kc, nB)  # [n, k, B]
+    ph = B[:, lag0:lag0 + n].T  # exp(i w_k n dt) [n, k]
+    A_c = (ctx.E_c @ (ph[:, :, None] * Xi_c).reshape(n, kc * nB)).reshape(rows_c, kc, nB)
+    Xi_e = ctx.psi_e[:, None, :] - _real_times_complex(ctx.phi_e, Q).reshape(nd, kc, nB)  # [d, k, B]
+    A = np.concatenate([A_c, Xi_e]) if nd else A_c  # output functionals: contact harmonics, elongations
+    PTA = np.einsum("kbr,xkb->krx", P, A)
+    V = np.linalg.solve(np.transpose(S, (0, 2, 1)), PTA)  # S^-T P^T A
+    U = (np.conj(P) @ V) * wk[:, None, None]  # [k, B, row]
+    Yc = np.conj(ph)[:, :, None] * Xi_c  # a unit load at contact point n_hat at its instant
+    acc.H2 += U[:, :, :rows_c].transpose(2, 0, 1).reshape(rows_c, kc * nB) @ Yc.reshape(n, kc * nB).T
+    if nd:
+        _accumulate_dropper_chunk(ctx, acc, om, wk, B, dp, S, P, U, Yc, Xi_e)
+
+
+def _contact_operator(ctx: _BuildContext, acc: _FrequencySums, J: int) -> np.ndarray:
+    """The contact-to-contact operator (unreduced modal part by lag, plus the boundary harmonics), reduced to J."""
+    n, ii, lag0, phi_c, G = ctx.n, ctx.ii, ctx.lag0, ctx.phi_c, acc.G
     cc1 = np.empty((n, n))
     for m in range(-(n - 1), n):  # one lag (diagonal) at a time: sum_p phi_p(x_n) phi_p(x_n-m) g_p(m)
         rows = ii[max(m, 0):n + min(m, 0)]
         cc1[rows, rows - m] = (phi_c[rows] * phi_c[rows - m]) @ G[:, m + lag0]
-    cc = _reduce(cc1, _combine(H2, J), J, n)
+    return _reduce(cc1, _combine(acc.H2, J), J, n)
+
+
+def _dropper_operators(ctx: _BuildContext, acc: _FrequencySums, J: int,
+                       Jd: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The per-dropper operators dc, cd and dd assembled from the lag functions and boundary sums."""
+    n, nd, ii, lag0, win, G = ctx.n, ctx.nd, ctx.ii, ctx.lag0, ctx.win, acc.G
     dc = np.empty((n, nd, Jd), dtype=complex)
     cd = np.empty((n, nd, n))
     dd = np.empty((nd, n, nd, Jd), dtype=complex)
     for d in range(nd):
-        Y = phi_c @ (phi_e[d][:, None] * G)  # [n_hat or n, lag]
+        Y = ctx.phi_c @ (ctx.phi_e[d][:, None] * G)  # [n_hat or n, lag]
         t = win[d] + ii
-        dc1 = Y[ii[None, :], t[:, None] - ii[None, :] + lag0] + np.real(H2_dc[d])  # [i, n_hat]: lag t - n_hat
+        dc1 = Y[ii[None, :], t[:, None] - ii[None, :] + lag0] + np.real(acc.H2_dc[d])  # [i, n_hat]: lag t - n_hat
         dc[:, d, :] = sfft.rfft(dc1, axis=0)[:Jd].T  # Paper D sec. 3.7: N_hd harmonics over the window
         cd1 = -Y[ii[:, None], ii[:, None] - t[None, :] + lag0]  # [n, i']: lag n - t', load = -elongation
-        red = _reduce(cd1, _combine(H2_cd[d][:, t + lag0], J), J, n)  # [n, i']
+        red = _reduce(cd1, _combine(acc.H2_cd[d][:, t + lag0], J), J, n)  # [n, i']
         cd[np.mod(t, n), d, :] = red.T  # by the phase of the correction instant
         for e in range(nd):  # column i' of the Toeplitz operator, reduced over the observed index i
-            cols = dd_lag[e, d, ii[:, None] - ii[None, :] + win[e] - win[d] + lag0]  # [i, i']
+            cols = acc.dd_lag[e, d, ii[:, None] - ii[None, :] + win[e] - win[d] + lag0]  # [i, i']
             dd[d, :, e, :] = sfft.rfft(cols, axis=0)[:Jd].T
+    return dc, cd, dd
+
+
+def build_operators(cb: ContactBlock, s: PfemSettings, progress=None, chunk: int = 300) -> PfemOperators:
+    """All operators of a block at one speed and step (Paper C eqs. 19-33, Paper D eqs. 11-12)."""
+    t_start = time.perf_counter()
+    n, dt = s.samples_per_span, s.dt_s
+    period = n * dt
+    if abs(period * s.speed_m_s - cb.block.length_m) > 1e-6 * cb.block.length_m:
+        raise ValueError("samples_per_span x dt x speed must equal the block length")
+    J, Jd = s.n_harmonics, s.n_harmonics_dropper
+    omega, w, x, ctx = _build_context(cb, s, period, J)
+    nd, win = ctx.nd, ctx.win
+    acc = _FrequencySums.zeros(ctx)
+    for k0 in range(0, len(omega), chunk):
+        om = omega[k0:k0 + chunk]
+        wk = w[k0:k0 + chunk]
+        _accumulate_chunk(ctx, acc, om, wk)
+        if progress is not None:
+            progress(min(k0 + len(om), len(omega)), len(omega))
+    cc = _contact_operator(ctx, acc, J)
+    dc, cd, dd = _dropper_operators(ctx, acc, J, Jd)
     z0 = cb.z0(x) if cb.z0 is not None else np.zeros(n)
     info = {"build_s": time.perf_counter() - t_start, "n_frequencies": len(omega), "grid": s.grid,
-            "omega_max": float(omega[-1]), "modes": r, "boundary_dofs": int(nB)}
+            "omega_max": float(omega[-1]), "modes": ctx.r, "boundary_dofs": int(ctx.nB)}
     empty = np.zeros(0)
     ops = PfemOperators(s, np.ascontiguousarray(cc.T), dc, cd, dd, np.asarray(z0, dtype=float), win,
                         cb.dropper_tension_N if nd else empty, cb.dropper_stiffness_N_m if nd else empty,
