@@ -578,7 +578,7 @@ def _cmd_stability(args) -> int:
     from pantohil.orchestrator.stability_run import parse_range, run_stability
 
     f_max = parse_range(args.fmax, "--fmax")
-    stiffness = parse_range(args.contact_stiffness, "--contact-stiffness")
+    stiffness = parse_range(args.contact_stiffness, "--contact-stiffness", positive=True)
     delays = parse_range(args.delay, "--delay", integer=True)
     try:
         s = run_stability(args.case, args.overrides, args.out, args.update, f_max, stiffness, delays,

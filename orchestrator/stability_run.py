@@ -30,8 +30,9 @@ MAX_AXIS_POINTS = 10_000
 MAX_MAP_POINTS = 200_000
 
 
-def parse_range(text: str | None, option: str, integer: bool = False) -> np.ndarray | None:
-    """"A:B:N" (N values from A to B), "A:B:N:log" (geometric), "A,B,C" or "A"."""
+def parse_range(text: str | None, option: str, integer: bool = False, positive: bool = False) -> np.ndarray | None:
+    """"A:B:N" (N values from A to B), "A:B:N:log" (geometric), "A,B,C" or "A"; with `positive`, every
+    value must be above 0."""
     if text is None:
         return None
     parts = text.split(":")
@@ -61,6 +62,8 @@ def parse_range(text: str | None, option: str, integer: bool = False) -> np.ndar
         raise CaseError(f"{option}: empty range {text!r}")
     if not np.all(np.isfinite(values)):
         raise CaseError(f"{option}: values must be finite numbers (got {text!r})")
+    if positive and np.any(values <= 0):
+        raise CaseError(f"{option}: must be > 0 (got {text!r})")
     if integer:
         if np.any(values != np.round(values)):
             raise CaseError(f"{option}: delays are whole steps (got {text!r})")
