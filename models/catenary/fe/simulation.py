@@ -142,22 +142,18 @@ def simulate_section(cat: CatenaryDefinition, pan: PantographParameters, n_spans
     return res
 
 
-def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: float, droppers_slacken: bool = True,
-                      hht: HhtConstants | None = None, progress=None,
-                      reference_height_m: float | None = None) -> FeSimResult:
-    """HHT time integration of a section with the pantograph in penalty contact and slackening droppers."""
-    t0 = time.perf_counter()
+def _section_operators(model: SectionModel, hht: HhtConstants, dt: float):
+    """The section's factorised HHT matrix, its unit responses and the droppers' influence vectors."""
     K, M = model.K, model.M
     C = (model.alpha * M + model.beta * K).tocsr()
     dash = model.dashpots
     if dash is not None:
         C = (C + sparse.diags(dash)).tocsr()
     nf = K.shape[0]
-    hht = hht if hht is not None else HhtConstants()
-    a, b, g, dt = hht.alpha, hht.beta, hht.gamma, dt_s
+    a, b, g = hht.alpha, hht.beta, hht.gamma
     solver = _Banded((M + (1 + a) * (g * dt * C + b * dt * dt * K)).tocsr())
     unit = _UnitResponses(solver)
-    d_lo, d_up, f0, kd = model.d_lo, model.d_up, model.f0, model.kd
+    d_lo, d_up = model.d_lo, model.d_up
     nd = len(d_lo)
     scale = b * dt * dt * (1 + a)  # displacement per unit new force, through S = A_eff^-1
     G = np.zeros((nf, nd))
@@ -166,6 +162,92 @@ def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: floa
         rhs[d_lo[j]], rhs[d_up[j]] = 1.0, -1.0
         G[:, j] = solver.solve(rhs) * scale
     E_dd = G[d_up] - G[d_lo]  # elongation of dropper i per unit correction of dropper j
+    return K, M, dash, nf, solver, unit, nd, scale, G, E_dd
+
+
+def _free_step(model: SectionModel, K, M, dash, solver, a, b, g, dt, u, v, acc, F_old):
+    """HHT predictors and the free step (no new contact force or corrections): u_pred, v_pred, acc_free, u_free."""
+    u_pred = u + dt * v + dt * dt * (0.5 - b) * acc
+    v_pred = v + dt * (1 - g) * acc
+    # a (C v + K u) - (1 + a)(C v_pred + K u_pred) with C = alpha M + beta K: two products
+    rhs = (K @ (a * (model.beta * v + u) - (1 + a) * (model.beta * v_pred + u_pred))
+           + M @ (model.alpha * (a * v - (1 + a) * v_pred)) - a * F_old)
+    if dash is not None:
+        rhs += dash * (a * v - (1 + a) * v_pred)
+    acc_free = solver.solve(rhs)
+    u_free = u_pred + b * dt * dt * acc_free
+    return u_pred, v_pred, acc_free, u_free
+
+
+def _contact_influence(model: SectionModel, unit, scale, nf, s_row, z_static_next, u_free):
+    """The contact point's load vector, its unit response and the free wire height and dropper elongations."""
+    d_lo, d_up = model.d_lo, model.d_up
+    ri, rv = s_row.indices, s_row.data
+    n_c = np.zeros(nf)
+    n_c[ri] = rv
+    g_c = unit.combination(s_row) * scale  # displacement per unit contact force
+    z_free = z_static_next + rv @ u_free[ri]
+    z_per_fc = float(rv @ g_c[ri])
+    dL_free = u_free[d_up] - u_free[d_lo]
+    dL_per_fc = g_c[d_up] - g_c[d_lo]
+    return ri, rv, n_c, g_c, z_free, z_per_fc, dL_free, dL_per_fc
+
+
+def _solve_active_set(model: SectionModel, G, E_dd, nd, droppers_slacken, slack, fa, fb, ri, rv, z_free, z_per_fc,
+                      dL_free, dL_per_fc):
+    """Active-set loop of a step: contact state, slack set, contact force and dropper corrections, solved together."""
+    f0, kd = model.f0, model.kd
+    in_contact = True
+    for _ in range(30):
+        idx = np.flatnonzero(slack) if droppers_slacken else np.zeros(0, dtype=int)
+        # unknowns: f_c (if in contact) and the corrections of the slack droppers
+        nu = len(idx) + 1
+        Amat = np.zeros((nu, nu))
+        bvec = np.zeros(nu)
+        if in_contact:  # f_c - B (z_free + z_per_fc f_c + sum g_c-effects of corrections) = A
+            Amat[0, 0] = 1.0 - fb * z_per_fc
+            if len(idx):
+                Amat[0, 1:] = -fb * (rv @ G[ri][:, idx])
+            bvec[0] = fa + fb * z_free
+        else:
+            Amat[0, 0] = 1.0
+        for r, j in enumerate(idx):  # f0 + kd dL + corr = 0 with dL = dL_free + dL_per_fc f_c + E corr
+            Amat[r + 1, 0] = kd[j] * dL_per_fc[j]
+            Amat[r + 1, 1:] = kd[j] * E_dd[j, idx]
+            Amat[r + 1, r + 1] += 1.0
+            bvec[r + 1] = -f0[j] - kd[j] * dL_free[j]
+        sol = np.linalg.solve(Amat, bvec)
+        fc_new = sol[0]
+        corr_new = np.zeros(nd)
+        corr_new[idx] = sol[1:]
+        dL = dL_free + dL_per_fc * fc_new + E_dd @ corr_new
+        changed = False
+        if in_contact and fc_new < 0:
+            in_contact, changed = False, True
+        elif not in_contact:
+            z_now = z_free + (rv @ (G[ri] @ corr_new) if len(idx) else 0.0)
+            if fa + fb * z_now > 0:
+                in_contact, changed = True, True
+        if droppers_slacken:
+            want = f0 + kd * dL + corr_new < -1e-9  # a tense dropper that would be compressed
+            release = slack & (corr_new < 0)  # a slack dropper that would need to push
+            if want.any() or release.any():
+                slack = (slack | want) & ~release
+                changed = True
+        if not changed:
+            break
+    return in_contact, idx, fc_new, corr_new, slack
+
+
+def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: float, droppers_slacken: bool = True,
+                      hht: HhtConstants | None = None, progress=None,
+                      reference_height_m: float | None = None) -> FeSimResult:
+    """HHT time integration of a section with the pantograph in penalty contact and slackening droppers."""
+    t0 = time.perf_counter()
+    hht = hht if hht is not None else HhtConstants()
+    a, b, g, dt = hht.alpha, hht.beta, hht.gamma, dt_s
+    K, M, dash, nf, solver, unit, nd, scale, G, E_dd = _section_operators(model, hht, dt)
+    d_lo, d_up, f0, kd = model.d_lo, model.d_up, model.f0, model.kd
     sup_dofs = model.recorded
     shapes_all, z_static, x_all = model.shapes, model.z_static, model.x_m
     n_steps = len(x_all) - 1
@@ -185,66 +267,14 @@ def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: floa
     uplift = np.zeros((n_steps, len(sup_dofs)), dtype=np.float32)
     slack = np.zeros(nd, dtype=bool)
     for k in range(n_steps):
-        u_pred = u + dt * v + dt * dt * (0.5 - b) * acc
-        v_pred = v + dt * (1 - g) * acc
-        # a (C v + K u) - (1 + a)(C v_pred + K u_pred) with C = alpha M + beta K: two products
-        rhs = (K @ (a * (model.beta * v + u) - (1 + a) * (model.beta * v_pred + u_pred))
-               + M @ (model.alpha * (a * v - (1 + a) * v_pred)) - a * F_old)
-        if dash is not None:
-            rhs += dash * (a * v - (1 + a) * v_pred)
-        acc_free = solver.solve(rhs)
-        u_free = u_pred + b * dt * dt * acc_free
-        s_row = shapes_all[k + 1]
-        ri, rv = s_row.indices, s_row.data
-        n_c = np.zeros(nf)
-        n_c[ri] = rv
-        g_c = unit.combination(s_row) * scale  # displacement per unit contact force
-        z_free = z_static[k + 1] + rv @ u_free[ri]
-        z_per_fc = float(rv @ g_c[ri])
-        dL_free = u_free[d_up] - u_free[d_lo]
-        dL_per_fc = g_c[d_up] - g_c[d_lo]
+        u_pred, v_pred, acc_free, u_free = _free_step(model, K, M, dash, solver, a, b, g, dt, u, v, acc, F_old)
+        ri, rv, n_c, g_c, z_free, z_per_fc, dL_free, dL_per_fc = _contact_influence(
+            model, unit, scale, nf, shapes_all[k + 1], z_static[k + 1], u_free)
         # the pantograph's step is affine in the wire height: f = A + B z for a contact state
         fa = _pantograph_force(p, 0.0)
         fb = _pantograph_force(p, 1.0) - fa
-        in_contact = True
-        for _ in range(30):
-            idx = np.flatnonzero(slack) if droppers_slacken else np.zeros(0, dtype=int)
-            # unknowns: f_c (if in contact) and the corrections of the slack droppers
-            nu = len(idx) + 1
-            Amat = np.zeros((nu, nu))
-            bvec = np.zeros(nu)
-            if in_contact:  # f_c - B (z_free + z_per_fc f_c + sum g_c-effects of corrections) = A
-                Amat[0, 0] = 1.0 - fb * z_per_fc
-                if len(idx):
-                    Amat[0, 1:] = -fb * (rv @ G[ri][:, idx])
-                bvec[0] = fa + fb * z_free
-            else:
-                Amat[0, 0] = 1.0
-            for r, j in enumerate(idx):  # f0 + kd dL + corr = 0 with dL = dL_free + dL_per_fc f_c + E corr
-                Amat[r + 1, 0] = kd[j] * dL_per_fc[j]
-                Amat[r + 1, 1:] = kd[j] * E_dd[j, idx]
-                Amat[r + 1, r + 1] += 1.0
-                bvec[r + 1] = -f0[j] - kd[j] * dL_free[j]
-            sol = np.linalg.solve(Amat, bvec)
-            fc_new = sol[0]
-            corr_new = np.zeros(nd)
-            corr_new[idx] = sol[1:]
-            dL = dL_free + dL_per_fc * fc_new + E_dd @ corr_new
-            changed = False
-            if in_contact and fc_new < 0:
-                in_contact, changed = False, True
-            elif not in_contact:
-                z_now = z_free + (rv @ (G[ri] @ corr_new) if len(idx) else 0.0)
-                if fa + fb * z_now > 0:
-                    in_contact, changed = True, True
-            if droppers_slacken:
-                want = f0 + kd * dL + corr_new < -1e-9  # a tense dropper that would be compressed
-                release = slack & (corr_new < 0)  # a slack dropper that would need to push
-                if want.any() or release.any():
-                    slack = (slack | want) & ~release
-                    changed = True
-            if not changed:
-                break
+        in_contact, idx, fc_new, corr_new, slack = _solve_active_set(
+            model, G, E_dd, nd, droppers_slacken, slack, fa, fb, ri, rv, z_free, z_per_fc, dL_free, dL_per_fc)
         corr = corr_new
         f_c = fc_new if in_contact else 0.0
         F_new = n_c * f_c
