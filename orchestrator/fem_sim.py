@@ -89,6 +89,15 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
         "timing": {"wall_s": res.wall_s, "steps": len(res.force_N), "peak_memory_MB": res.peak_memory_bytes / 1e6},
         "en50318": "not claimed: the standard's reference model and acceptance ranges were not available",
     }
+    _write_force_tables(out_dir, spans, blocks_raw, blocks, dt, n, corr_mid, per_span)
+    _write_mcap(out_dir, case, n_spans, dt, per_span, res, filtered, d_mid)
+    _write_plots(out_dir, case, n_spans, dt, cat, res, filtered, spans, blocks, corr_mid, mid)
+    report.write_json_atomic(out_dir / "summary.json", summary)
+    return summary
+
+
+def _write_force_tables(out_dir: Path, spans, blocks_raw, blocks, dt, n, corr_mid, per_span) -> None:
+    """Write central_spans.csv (raw and low-passed force of the central spans) and dropper_corrections.csv."""
     with open(out_dir / "central_spans.csv", "w") as fh:
         fh.write(f"span,t_s,f_N,f_lowpass_{CUTOFF_HZ:g}hz_N\n")  # the low-pass is of the whole run (no edge effect)
         for j, blk, flt in zip(spans, blocks_raw, blocks, strict=False):
@@ -96,6 +105,10 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
                 fh.write(f"{j},{m * dt:.6f},{f:.9g},{ff:.9g}\n")
     np.savetxt(out_dir / "dropper_corrections.csv", np.column_stack([np.arange(n) * dt, corr_mid]), delimiter=",",
                header="t_s," + ",".join(f"dropper_{d + 1}_N" for d in range(per_span)), comments="", fmt="%.9g")
+
+
+def _write_mcap(out_dir: Path, case: Case, n_spans: int, dt, per_span, res, filtered, d_mid) -> None:
+    """Write run.mcap: the pantograph's position and force and the middle central span's dropper forces."""
     recorder = McapRecorder(out_dir / "run.mcap", {
         "/pantograph": {"x_m": "pantograph position [m]", "contact_force": "contact force [N]",
                         "filtered_force": f"{CUTOFF_HZ:g} Hz low-pass [N]"},
@@ -104,6 +117,11 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
     recorder.write_block("/pantograph", res.t_s, np.column_stack([res.x_m, res.force_N, filtered]))
     recorder.write_block("/droppers", res.t_s, res.dropper_force_N[:, d_mid].astype(float))
     recorder.close()
+
+
+def _write_plots(out_dir: Path, case: Case, n_spans: int, dt, cat, res, filtered, spans, blocks, corr_mid,
+                 mid) -> None:
+    """Plot the force along the section, the central spans overlaid and the dropper corrections."""
     report.plot_section_force(out_dir / "force_along_section.png", res.x_m, res.force_N, filtered, cat.span_m,
                               spans, f"{case.name}: {n_spans}-span section, {case.speed_kmh:.0f} km/h")
     report.plot_force_comparison(out_dir / "central_spans.png", dt,
@@ -111,8 +129,6 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
                                  f"{case.name}: central spans overlaid")
     report.plot_dropper_corrections(out_dir / "dropper_corrections.png", dt, corr_mid,
                                     f"{case.name}: dropper correction forces, span {mid}")
-    report.write_json_atomic(out_dir / "summary.json", summary)
-    return summary
 
 
 def _label(cat) -> str:
