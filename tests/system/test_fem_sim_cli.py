@@ -57,7 +57,7 @@ def test_a_lost_contact_gives_zero_force_not_negative(tmp_path):
 
 
 @pytest.mark.parametrize("args,message", [
-    (["--spans", "0"], "--spans: must be at least 1"),
+    (["--spans", "0"], "argument --spans: 0 is outside [1, 200]"),
     (["--spans", "5"], "leave no central region"),
 ])
 def test_bad_section_sizes_give_one_line(tmp_path, args, message):
