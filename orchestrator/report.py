@@ -4,6 +4,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+import warnings
 from pathlib import Path
 
 import matplotlib
@@ -31,10 +32,14 @@ def _clean(obj):
 
 
 def save_figure(fig, path: Path) -> None:
-    """Lay out, write atomically (PNG, 120 dpi) and free a figure."""
-    fig.tight_layout()
-    with atomic_path(path) as part:
-        fig.savefig(part, dpi=120, format="png")
+    """Lay out, write atomically (PNG, 120 dpi) and free a figure. An axis over constant data (a run that
+    ended after a step or two) is drawn as matplotlib widens it, without its warning on stderr, which
+    carries the run's one line."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Attempting to set identical", category=UserWarning)
+        fig.tight_layout()
+        with atomic_path(path) as part:
+            fig.savefig(part, dpi=120, format="png")
     plt.close(fig)
 
 
