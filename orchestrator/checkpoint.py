@@ -44,8 +44,8 @@ def save(out_dir: Path, master, monitor, span: int, run_info: dict) -> None:
             arrays[f"record_int/{name}"] = master.record_int[name][master.rows(start, stop)]
         if name in master.record_in:
             arrays[f"record_in/{name}"] = master.record_in[name][master.rows(start, stop)]
-    if monitor._prev is not None:
-        arrays["monitor/previous_force"] = monitor._prev
+    if len(monitor._prev):  # the spans the next change is measured against, oldest first
+        arrays["monitor/previous_force"] = np.stack(monitor._prev)
     part = folder / (ARRAYS + ".part")
     with open(part, "wb") as f:
         np.savez(f, **arrays)
@@ -94,5 +94,6 @@ def restore(checkpoint: dict, master, monitor, fmus: dict[str, Path]) -> int:
         if name in master.record_in:
             master.record_in[name][master.rows(start, k)] = arrays[f"record_in/{name}"]
     monitor.history = [dict(h) for h in meta["history"]]
-    monitor._prev = arrays.get("monitor/previous_force")
+    previous = arrays.get("monitor/previous_force")
+    monitor._prev = [] if previous is None else [row.copy() for row in np.atleast_2d(previous)]
     return span + 1
