@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -63,8 +65,14 @@ def _follow_process(proc: subprocess.Popen, figures: dict) -> None:
         threading.Event().wait(0.05)
 
 
-def one_run(arm: int, out: Path, spans: int) -> dict | None:
-    cmd = [sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--out", str(out), "--quiet",
+def _pinned(cpu: int | None) -> list[str]:
+    """taskset prefix: the run (and its MCAP writer) on one CPU, so that no arm gains or loses by where the
+    kernel happens to place it (unpinned, the same run steps at 20 or 33 us per catenary call on VM-2)."""
+    return [] if cpu is None or shutil.which("taskset") is None else ["taskset", "-c", str(cpu)]
+
+
+def one_run(arm: int, out: Path, spans: int, cpus: tuple[int | None, int | None] = (None, None)) -> dict | None:
+    cmd = [*_pinned(cpus[0]), sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--out", str(out), "--quiet",
            "--set", f"run.max_spans={spans}", "--set", "run.convergence_tol=1e-12"]
     if arm:
         cmd += ["--live", "127.0.0.1:0", "--live-wait"]
@@ -78,7 +86,8 @@ def one_run(arm: int, out: Path, spans: int) -> dict | None:
             if "listening on" in line:
                 url = line.split("listening on ")[1].split()[0]
                 stall = ["--stall"] if arm == 2 else []
-                viewer = subprocess.Popen([sys.executable, __file__, "--client", url, *stall], start_new_session=True)
+                viewer = subprocess.Popen([*_pinned(cpus[1]), sys.executable, __file__, "--client", url, *stall],
+                                          start_new_session=True)
                 break
     _, err = run.communicate()
     watcher.join()
@@ -106,6 +115,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--spans", type=int, default=30, help="spans per run (a fixed amount of work)")
+    ap.add_argument("--pin", action=argparse.BooleanOptionalAction, default=True,
+                    help="run on the last CPU, the client on the first (default: pinned)")
     ap.add_argument("--client", metavar="URL", help=argparse.SUPPRESS)
     ap.add_argument("--stall", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -113,14 +124,17 @@ def main() -> None:
         client(args.client, args.stall)
         return
     results = {arm: [] for arm in range(len(ARMS))}
+    n_cpus = os.cpu_count() or 1
+    cpus = (n_cpus - 1, 0) if args.pin and n_cpus > 1 else (None, None)
     with tempfile.TemporaryDirectory() as tmp:
         one_run(0, Path(tmp) / "warmup", 2)  # builds (and caches) the FMUs
         for i in range(args.repeats):
             for arm in results:
-                row = one_run(arm, Path(tmp) / f"r{i}-{arm}", args.spans)
+                row = one_run(arm, Path(tmp) / f"r{i}-{arm}", args.spans, cpus)
                 if row is not None:
                     results[arm].append(row)
-    print(f"default case, {args.spans} spans per run, {args.repeats} interleaved repeats per arm")
+    print(f"default case, {args.spans} spans per run, {args.repeats} interleaved repeats per arm; run on CPU "
+          f"{cpus[0]}, client on CPU {cpus[1]}; uptime: {os.popen('uptime').read().strip()}")
     keys = {"rtf": ("real time", "x"), "us_per_step": ("wall per step", "us"),
             "cpu_us_per_step": ("CPU per step", "us"), "fmu_us_per_step": ("FMU calls/step", "us")}
     base = {k: statistics.median(r[k] for r in results[0]) for k in keys}
