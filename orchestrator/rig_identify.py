@@ -80,7 +80,7 @@ def identify(req: IdentifyRequest, announce=print) -> dict:
     source = f"rig file {base.name} in process" if req.hardware is None else f"{req.hardware[0]}:{req.hardware[1]}"
     announce(f"identifying {source}: {case.n_harmonics - 1} harmonics, {exc.frequencies_hz()[0]:.4g}-"
              f"{exc.frequencies_hz()[-1]:.4g} Hz, {req.amplitude_m * 1e3:g} mm, {exc.record_spans} spans recorded "
-             f"after 1 settling ({exc.total_steps} steps), mass {case.pantograph.masses_kg[0]:g} kg")
+             f"after {exc.settle_spans} settling ({exc.total_steps} steps), mass {case.pantograph.masses_kg[0]:g} kg")
     if req.hardware is None:
         r = case.values["rig"]
         measured = identify_chain(base, exc, case.pantograph, r["force_offset_N"], r["noise_std_N"], r["noise_seed"])

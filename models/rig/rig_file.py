@@ -175,6 +175,8 @@ def _toml_value(v) -> str:
         return "true" if v else "false"
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, float):
+        return repr(float(v))  # a numpy float's repr is not TOML
     return repr(v)
 
 
