@@ -30,8 +30,8 @@ def _errors(rig_file: Path, case) -> dict:
 
 
 def _figures(err: dict) -> str:
-    return "; ".join(f"{p}: |G| {100 * err[p]['max_magnitude_error']:.2g} %, arg {err[p]['max_phase_error_deg']:.2g} deg"
-                     for p in ("height", "force"))
+    return "; ".join(f"{p}: |G| {100 * e['max_magnitude_error']:.2g} %, arg {e['max_phase_error_deg']:.2g} deg"
+                     for p, e in err.items())
 
 
 @pytest.mark.network
