@@ -157,6 +157,8 @@ def _add_rig_identify_command(sub) -> None:
     ident.add_argument("--spans", type=number(1, 64, integer=True), metavar="S",
                        help="spans recorded (default: whole periods of the rig file's clocks, at least 4; 8 "
                             "without a rig file)")
+    ident.add_argument("--rt-priority", type=number(0, 99, integer=True), default=50, metavar="P",
+                       help="rig-paced: SCHED_FIFO priority while stepping, if permitted (0: normal; default 50)")
 
 
 def _add_catenary_command(sub) -> None:
@@ -502,7 +504,8 @@ def _cmd_identify(args) -> int:
     hardware = _hardware_endpoint(args.hardware)
     if hardware is not None:
         _check_key_file(case)
-    request = IdentifyRequest(case, args.out, rig, hardware, args.amplitude_mm * 1e-3, args.spans, args.overwrite)
+    request = IdentifyRequest(case, args.out, rig, hardware, args.amplitude_mm * 1e-3, args.spans, args.overwrite,
+                              args.rt_priority)
     try:
         identify(request, announce=lambda line: print(line, flush=True))
     except LinkLost as exc:

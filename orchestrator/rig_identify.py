@@ -11,7 +11,10 @@ one is one line, exit code 2, and nothing written.
 """
 from __future__ import annotations
 
+import contextlib
 import datetime
+import gc
+import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +29,7 @@ from pantohil.models.rig.rig_file import rig_to_toml, with_measured
 from pantohil.models.storage import write_text_atomic
 
 LINK_FAULT = 2
+MAX_REUSED = 0.01  # rig-paced: reused ticks a record may hold (their figures are printed)
 
 
 class LinkLost(Exception):
@@ -44,6 +48,7 @@ class IdentifyRequest:
     amplitude_m: float = 1e-3
     spans: int | None = None
     overwrite: bool = False
+    rt_priority: int | None = 50  # rig-paced: SCHED_FIFO while stepping, as a run
 
 
 def check_request(req: IdentifyRequest) -> RigSpec:
@@ -81,66 +86,138 @@ def identify(req: IdentifyRequest, announce=print) -> dict:
     announce(f"identifying {source}: {case.n_harmonics - 1} harmonics, {exc.frequencies_hz()[0]:.4g}-"
              f"{exc.frequencies_hz()[-1]:.4g} Hz, {req.amplitude_m * 1e3:g} mm, {exc.record_spans} spans recorded "
              f"after {exc.settle_spans} settling ({exc.total_steps} steps), mass {case.pantograph.masses_kg[0]:g} kg")
+    reused = 0
     if req.hardware is None:
         r = case.values["rig"]
         measured = identify_chain(base, exc, case.pantograph, r["force_offset_N"], r["noise_std_N"], r["noise_seed"])
     else:
-        measured = _identify_hardware(case, req.hardware, exc)
+        measured, reused = _identify_hardware(case, req.hardware, exc, req.rt_priority)
+        if reused:
+            announce(f"the record holds {reused} rig ticks that reused an old height (answers later than a tick)")
     errors = None
     if chain_known:
         gz, gf = frequency_response(base, case.dt_s, case.samples_per_span, case.n_harmonics)
         errors = response_errors(measured, gz[1:], gf[1:])
-    header = _header(case, exc, source, errors)
+    header = _header(case, exc, source + (f" ({reused} reused ticks in the record)" if reused else ""), errors)
     write_text_atomic(Path(req.out), rig_to_toml(with_measured(base, measured), header))
     for line in _report(measured, errors):
         announce(line)
     announce(f"rig file written: {req.out}")
-    return {"measured": measured, "errors": errors, "excitation": exc}
+    return {"measured": measured, "errors": errors, "excitation": exc, "reused": reused}
 
 
-def _identify_hardware(case: Case, hardware: tuple, exc: Excitation) -> MeasuredResponse:
-    """The excitation through the adapter FMU and the UDP link, records aligned by the answer's shift."""
+@dataclass
+class CleanWindow:
+    """The first window of `length` aligned steps from `first` on with no rig tick that reused an old
+    height in it nor in the `margin` steps before it (the chain's memory); rig-paced records only."""
+
+    first: int
+    length: int
+    margin: int
+    shift: int
+    reused: int = 0
+    last_reuse: int = -1
+    start: int | None = None
+
+    def update(self, k: int, reused: int) -> bool:
+        """Row k taken with the rig's reused count: True once a clean window is complete."""
+        if reused > self.reused:
+            self.reused, self.last_reuse = reused, k - self.shift
+        begin = max(self.first, self.last_reuse + 1 + self.margin)
+        if k - self.shift + 1 >= begin + self.length:
+            self.start = begin
+            return True
+        return False
+
+
+def _identify_hardware(case: Case, hardware: tuple, exc: Excitation,
+                       rt_priority: int | None) -> tuple[MeasuredResponse, int]:
+    """The excitation through the adapter FMU and the UDP link, records aligned by the answer's shift;
+    returns the response and the reused ticks in the record. Rig-paced, a tick that reused an old height
+    disturbs the record: the excitation (periodic after the settling spans) goes on for up to 3 more
+    records until a window of whole spans has none, else the window with the fewest is taken if they are
+    at most MAX_REUSED of its ticks (a reused tick matters only where the drive takes a reference)."""
     rig_paced = case.values["link"]["paced_by"] == "rig"
     shift = 1 if rig_paced else int(case.values["link"]["pipeline_steps"])
+    n, length = exc.samples_per_span, exc.record.stop - exc.record.start
+    window = CleanWindow(exc.record.start, length, 2 * n, shift)  # margin: the motion profile settles in 2 spans
+    heights = exc.heights(exc.total_steps + (3 * length if rig_paced else 0))
     with tempfile.TemporaryDirectory(prefix="pantohil_identify_") as tmp:
-        rows = _adapter_rows(case, hardware, exc.heights(), shift, Path(tmp))
-    k = exc.total_steps
-    command, height, measured = rows[:k, 0], rows[shift:shift + k, 1], rows[shift:shift + k, 2]
-    if rig_paced:
-        reused = rows[shift:shift + k, 3][exc.record]
-        if reused[-1] > reused[0]:
-            raise IdentificationError(f"the rig reused an old height at {int(reused[-1] - reused[0])} ticks of the "
-                                      f"record (answers later than a tick): nothing identified")
-    return estimate(exc, command, height, mass_force(case.pantograph, case.dt_s, height), measured)
+        rows = _adapter_rows(case, hardware, heights, shift, Path(tmp), rt_priority if rig_paced else None, window)
+    reused = 0
+    if window.start is None:
+        window.start, reused = _least_reused(rows[shift:, 3], window)
+        if reused > MAX_REUSED * length:
+            raise IdentificationError(f"the rig reused an old height at {reused} of {length} ticks of the best "
+                                      f"record (answers later than a tick; at most {MAX_REUSED:.0%} taken): nothing "
+                                      f"identified")
+    command, height, measured = rows[:len(rows) - shift, 0], rows[shift:, 1], rows[shift:, 2]
+    true = mass_force(case.pantograph, case.dt_s, height)
+    a = slice(window.start - exc.record.start, window.start - exc.record.start + exc.total_steps)
+    return estimate(exc, command[a], height[a], true[a], measured[a]), reused
 
 
-def _adapter_rows(case: Case, hardware: tuple, heights: np.ndarray, extra: int, tmp: Path) -> np.ndarray:
-    """Step the adapter FMU over the heights (then `extra` steps holding the last one): per step the
-    command sent, the actuator height and force of the answer taken, and the rig's reused count."""
+def _least_reused(counts: np.ndarray, window: CleanWindow) -> tuple[int, int]:
+    """The window start with the fewest reused ticks in it and its margin, and that number."""
+    ticks = np.concatenate([[0], np.diff(counts) > 0]).cumsum()  # reused ticks up to each aligned step
+    starts = np.arange(window.first, len(counts) - window.length + 1)
+    inside = ticks[starts + window.length - 1] - ticks[starts - window.margin]
+    best = int(np.argmin(inside))
+    return int(starts[best]), int(inside[best])
+
+
+def _adapter_rows(case: Case, hardware: tuple, heights: np.ndarray, extra: int, tmp: Path,
+                  rt_priority: int | None, window: CleanWindow) -> np.ndarray:
+    """Step the adapter FMU over the heights (then `extra` steps holding the last one) until `window` is
+    complete: per step the command sent, the actuator height and force of the answer taken, and the rig's
+    reused count. A rig-paced session steps at SCHED_FIFO `rt_priority` (if permitted) with the collector
+    paused, as a run."""
     from pantohil.builder.build_fmus import build_case_fmus
 
     from .fmu_runtime import FmuInstance
-    from .hil_run import REFUSALS
+    from .pacing import set_realtime_priority
 
     fmu = build_case_fmus(case, tmp / "fmus", 0, ("adapter",), hardware)["adapter"]
     inst = FmuInstance("adapter", fmu)
-    names = ["command_sent", "actuator_height", "measured_force", "reused", "link_state"]
     try:
         inst.setup(0.0, {})  # the excitation starts at 0, the adapter's starting height
-        start = inst.get_values(["link_state", "session_started", "rig_refusal"])
-        if start["link_state"] == LINK_FAULT and not start["session_started"]:
-            why = "; ".join(t for bit, t in REFUSALS.items() if int(start["rig_refusal"]) & bit) or "it did not answer"
-            raise LinkLost(f"the rig at {hardware[0]}:{hardware[1]} did not accept the session start: {why}")
-        rows = np.empty((len(heights) + extra, 4))
-        for k in range(len(rows)):
-            inst.set_values({"height_command": float(heights[min(k, len(heights) - 1)])})
-            inst.do_step(k * case.dt_s, case.dt_s)
-            v = inst.get_values(names)
-            if v["link_state"] == LINK_FAULT:
-                raise LinkLost(f"link to the rig lost at step {k} of the excitation: nothing identified")
-            rows[k] = v["command_sent"], v["actuator_height"], v["measured_force"], v["reused"]
+        _check_session(inst, hardware)
+        set_realtime_priority(rt_priority)
+        gc.collect()
+        gc.disable()
+        return _step_adapter(inst, heights, extra, case.dt_s, window)
     finally:
+        gc.enable()
+        with contextlib.suppress(OSError, AttributeError):
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
         inst.close()
+
+
+def _check_session(inst, hardware: tuple) -> None:
+    from .hil_run import REFUSALS
+
+    start = inst.get_values(["link_state", "session_started", "rig_refusal"])
+    if start["link_state"] == LINK_FAULT and not start["session_started"]:
+        why = "; ".join(t for bit, t in REFUSALS.items() if int(start["rig_refusal"]) & bit) or "it did not answer"
+        raise LinkLost(f"the rig at {hardware[0]}:{hardware[1]} did not accept the session start: {why}")
+
+
+def _step_adapter(inst, heights: np.ndarray, extra: int, dt: float, window: CleanWindow) -> np.ndarray:
+    command = inst.port(["height_command"])
+    reals = inst.port(["command_sent", "actuator_height", "measured_force"])
+    ints = inst.port(["reused", "link_state"])
+    rows = np.empty((len(heights) + extra, 4))
+    last = len(heights) - 1
+    for k in range(len(rows)):
+        command.write([float(heights[min(k, last)])])
+        inst.do_step(k * dt, dt)
+        reused, link = ints.read()
+        if link == LINK_FAULT:
+            raise LinkLost(f"link to the rig lost at step {k} of the excitation: nothing identified")
+        rows[k, :3] = reals.read()
+        rows[k, 3] = reused
+        if window.update(k, reused):
+            return rows[:k + 1]
     return rows
 
 

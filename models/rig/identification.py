@@ -48,12 +48,14 @@ class Excitation:
         """The recorded steps (after the settling spans)."""
         return slice(self.settle_spans * self.samples_per_span, self.total_steps)
 
-    def heights(self) -> np.ndarray:
-        """The commanded heights [m]: the multisine times `amplitude_m`, faded in with a raised cosine
-        over the first span so that the actuator starts at rest at 0."""
+    def heights(self, steps: int | None = None) -> np.ndarray:
+        """The commanded heights [m] (`steps` of them, default the excitation's): the multisine times
+        `amplitude_m`, faded in with a raised cosine over the first span so that the actuator starts at
+        rest at 0; span-periodic after it."""
         n = self.samples_per_span
-        shape = multisine(n, self.n_harmonics, self.total_steps, self.dt_s)
-        fade = np.ones(self.total_steps)
+        steps = self.total_steps if steps is None else steps
+        shape = multisine(n, self.n_harmonics, steps, self.dt_s)
+        fade = np.ones(steps)
         fade[:n] = 0.5 * (1 - np.cos(np.pi * np.arange(n) / n))
         return self.amplitude_m * shape * fade
 
