@@ -64,7 +64,8 @@ def test_the_emulator_runs_a_rig_file_as_the_in_process_loop(tmp_path):
     f_max, dt = load_case(CASE_B).values["hil"]["max_frequency_hz"], load_case(CASE_B).dt_s
     diff = rel_rms(lowpass_periodic(span[:, 3], dt, f_max), lowpass_periodic(virtual.force_N, dt, f_max))
     print(f"\nemulated rig file vs in-process loop: {100 * diff:.3g} % RMS of the std below {f_max:g} Hz, "
-          f"{100 * rel_rms(span[:, 3], virtual.force_N):.3g} % unfiltered ({summary['spans']} and {virtual.spans} spans)")
+          f"{100 * rel_rms(span[:, 3], virtual.force_N):.3g} % unfiltered ({summary['spans']} and "
+          f"{virtual.spans} spans)")
     assert diff <= 0.005
 
 
