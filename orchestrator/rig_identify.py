@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.case import Case, CaseError
-from pantohil.models.rig.drive_chain import MeasuredResponse, RigSpec, frequency_response
+from pantohil.models.rig.drive_chain import MeasuredResponse, RigSpec, frequency_response, record_spans
 from pantohil.models.rig.identification import (Excitation, IdentificationError, excitation, identify_chain,
                                                 is_mass, mass_force, estimate, response_errors)
 from pantohil.models.rig.rig_file import rig_to_toml, with_measured
@@ -64,6 +64,11 @@ def check_request(req: IdentifyRequest) -> RigSpec:
     spec = req.rig if req.rig is not None else case.rig_spec
     if req.rig is not None and abs(spec.model_step_s - case.dt_s) > 1e-6 * case.dt_s:
         raise CaseError(f"--rig: the rig runs at dt = {spec.model_step_s:g} s; the case's step is {case.dt_s:.6g} s")
+    if spec is not None and req.spans is not None:
+        period = record_spans(spec, case.dt_s, case.samples_per_span, minimum=1)
+        if req.spans % period:
+            raise CaseError(f"--spans: the rig's clocks repeat every {period} spans against this span: record a "
+                            f"multiple of {period} (got {req.spans})")
     out = Path(req.out)
     if out.is_dir():
         raise CaseError(f"--out: {out} is a directory, not a rig file")

@@ -157,6 +157,8 @@ def _bad_rig(tmp_path: Path) -> Path:
     (["--case", str(CASE_B)], "one of the arguments --rig --hardware is required"),
     (["--hardware", "127.0.0.1:0", "--case", str(CASE_B)], "--hardware:"),
     (["--rig", str(RIGS / "paper_b.toml"), "--case", str(CASE_B), "--amplitude-mm", "nan"], "--amplitude-mm"),
+    (["--rig", str(RIGS / "paper_b.toml"), "--case", str(CASE_B), "--spans", "3"],
+     "--spans: the rig's clocks repeat every 2 spans"),
 ])
 def test_bad_identify_inputs_are_one_line_and_write_nothing(tmp_path, args, message):
     out = tmp_path / "out.toml"
