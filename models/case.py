@@ -415,10 +415,21 @@ def build_case(raw: dict, source: Path) -> Case:
         if v["pfem"]["omega_max_rad_s"] > math.pi / dt:
             raise CaseError(f"pfem.omega_max_rad_s: {v['pfem']['omega_max_rad_s']:g} rad/s is above the Nyquist "
                             f"frequency pi/dt = {math.pi / dt:.1f} rad/s")
-    return Case(v["case"]["name"], source, v, cat, pan, rig, profile, speed, span, n, dt,
+    case = Case(v["case"]["name"], source, v, cat, pan, rig, profile, speed, span, n, dt,
                 harmonic_count(hil["max_frequency_hz"], n, dt), hil["update"], hil["relaxation"],
                 hil["ramp_steps"], hil["delay_compensation"], delay_override, model, definition, rig_spec,
                 hil["rig_compensation"])
+    _check_measured_response(case)
+    return case
+
+
+def _check_measured_response(case: Case) -> None:
+    """A rig file's measured response (pantohil rig-identify) must hold every harmonic the case keeps."""
+    if case.compensates_rig_response and case.rig_spec.measured is not None:
+        try:
+            case.rig_response()
+        except ValueError as exc:
+            raise CaseError(f"rig.file: {exc}") from None
 
 
 def load_case(path: Path | None = None, overrides: list[str] | None = None) -> Case:

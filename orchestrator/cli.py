@@ -113,7 +113,11 @@ def _add_rig_emulator_command(sub) -> None:
     emu.add_argument("--jitter-us", type=number(0.0, 1e5, unit="us"), default=0.0, metavar="J",
                      help="rig-paced: each tick moved by a uniform random time in [-J, J] us")
     emu.add_argument("--listen", required=True, metavar="HOST:PORT", help="address to listen on")
-    emu.add_argument("--case", type=Path, help="case file (TOML); default: the built-in case")
+    emu.add_argument("--case", type=Path, help="case file (TOML): the pantograph (or mass) on the rig, and its rig "
+                                               "file if it names one; default: the built-in case")
+    emu.add_argument("--rig", type=Path, metavar="FILE", help="rig file (TOML) whose chain the emulator runs (the "
+                                                              "drive's ramp, position loop, load cell...); default: "
+                                                              "the case's rig")
     emu.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE")
     for name, what in (("loss", "drop an answer"), ("reorder", "send an answer after the next one"),
                        ("duplicate", "send an answer twice"), ("corrupt", "flip a bit of an answer")):
@@ -132,6 +136,29 @@ def _add_rig_emulator_command(sub) -> None:
     )
     emu.add_argument("--rt-priority", type=number(0, 99, integer=True), default=49, metavar="P",
                      help="SCHED_FIFO priority if permitted (0: normal scheduling; default 49)")
+
+
+def _add_rig_identify_command(sub) -> None:
+    """`pantohil rig-identify` and its options."""
+    ident = sub.add_parser("rig-identify", help="measure a rig's frequency response at a case's kept harmonics with "
+                                                "its mass mounted, into a rig file the case compensates with")
+    rig = ident.add_mutually_exclusive_group(required=True)
+    rig.add_argument("--rig", type=Path, metavar="FILE", help="identify this rig file's chain in process")
+    rig.add_argument("--hardware", metavar="HOST:PORT", help="identify the rig controller (or rig-emulator) at "
+                                                             "HOST:PORT through the adapter FMU and the UDP link")
+    ident.add_argument("--case", type=Path, required=True, help="case file (TOML): the rigid mass mounted, the span "
+                                                                "and the kept harmonics (link settings for --hardware)")
+    ident.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                       help="override a case key (repeatable)")
+    ident.add_argument("--out", type=Path, required=True, help="rig file to write (TOML)")
+    ident.add_argument("--overwrite", action="store_true", help="replace --out if it exists")
+    ident.add_argument("--amplitude-mm", type=number(0.001, 50.0, unit="mm"), default=1.0, metavar="A",
+                       help="multisine amplitude per harmonic times sqrt(harmonics) [mm] (default 1)")
+    ident.add_argument("--spans", type=number(1, 64, integer=True), metavar="S",
+                       help="spans recorded (default: whole periods of the rig file's clocks, at least 4; 8 "
+                            "without a rig file)")
+    ident.add_argument("--rt-priority", type=number(0, 99, integer=True), default=50, metavar="P",
+                       help="rig-paced: SCHED_FIFO priority while stepping, if permitted (0: normal; default 50)")
 
 
 def _add_catenary_command(sub) -> None:
@@ -253,6 +280,7 @@ COMMANDS = (  # the order of `pantohil --help`
     _add_run_command,
     _add_watch_command,
     _add_rig_emulator_command,
+    _add_rig_identify_command,
     _add_catenary_command,
     _add_build_command,
     _add_package_command,
@@ -424,11 +452,24 @@ def _cmd_watch(args) -> int:
         return 130
 
 
+def _rig_file_arg(path: Path | None, option: str = "--rig"):
+    """A rig file named on the command line, validated (one line naming the key if it is bad)."""
+    if path is None:
+        return None
+    from pantohil.models.rig.rig_file import RigFileError, load_rig_file
+
+    try:
+        return load_rig_file(path)
+    except RigFileError as exc:
+        raise CaseError(f"{option}: {exc}") from None
+
+
 def _cmd_emulator(args) -> int:
     from pantohil.fmus.udp_protocol import parse_endpoint, read_key
     from pantohil.orchestrator.rig_emulator import Faults, RigEmulator, RigPacing
 
     case = load_case(args.case, args.overrides)
+    rig = _rig_file_arg(args.rig)
     try:
         listen = parse_endpoint(args.listen, listening=True)
         faults = Faults(args.loss, args.reorder, args.duplicate, args.corrupt, args.delay_us, args.seed)
@@ -441,15 +482,38 @@ def _cmd_emulator(args) -> int:
         raise CaseError(f"--key-file: {exc}") from None
     try:
         emulator = RigEmulator(case, listen, faults, args.stats, key, args.session_timeout_s,
-                               announce=lambda line: print(line, flush=True), pacing=pacing)
+                               announce=lambda line: print(line, flush=True), pacing=pacing, rig=rig)
     except OSError as exc:
         raise CaseError(f"--listen: cannot listen on {args.listen}: {exc.strerror}") from None
     from pantohil.orchestrator.pacing import set_realtime_priority
 
     scheduling = set_realtime_priority(args.rt_priority)
-    print(f"rig emulator for {case.name} listening on {emulator.address[0]}:{emulator.address[1]} "
+    chain = f" with rig {emulator.rig_spec.name}" if emulator.rig_spec is not None else ""
+    print(f"rig emulator for {case.name}{chain} listening on {emulator.address[0]}:{emulator.address[1]} "
           f"({args.paced_by}-paced, {scheduling})", flush=True)
     emulator.serve(args.max_seconds)
+    return 0
+
+
+def _cmd_identify(args) -> int:
+    from pantohil.models.rig.identification import IdentificationError
+    from pantohil.orchestrator.rig_identify import IdentifyRequest, LinkLost, identify
+
+    case = load_case(args.case, args.overrides)
+    rig = _rig_file_arg(args.rig)
+    hardware = _hardware_endpoint(args.hardware)
+    if hardware is not None:
+        _check_key_file(case)
+    request = IdentifyRequest(case, args.out, rig, hardware, args.amplitude_mm * 1e-3, args.spans, args.overwrite,
+                              args.rt_priority)
+    try:
+        identify(request, announce=lambda line: print(line, flush=True))
+    except LinkLost as exc:
+        print(f"pantohil: error: {exc}", file=sys.stderr)
+        return 3
+    except IdentificationError as exc:
+        print(f"pantohil: error: {exc}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -640,8 +704,8 @@ def main(argv: list[str] | None = None) -> int:
         with stop_on_signals() as stop:
             return _guarded(lambda a: _cmd_run(a, stop), args)
     handler = {"build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
-               "rig-emulator": _cmd_emulator, "catenary": _cmd_catenary, "example": _cmd_example,
-               "fem-sim": _cmd_fem_sim, "compare": _cmd_compare, "stability": _cmd_stability,
+               "rig-emulator": _cmd_emulator, "rig-identify": _cmd_identify, "catenary": _cmd_catenary,
+               "example": _cmd_example, "fem-sim": _cmd_fem_sim, "compare": _cmd_compare, "stability": _cmd_stability,
                "sweep": _cmd_sweep, "watch": _cmd_watch}[args.command]
     return _guarded(handler, args)
 

@@ -1,13 +1,16 @@
 """`pantohil rig-emulator`: a process that plays the rig's real-time controller over UDP.
 
-Model-paced (lockstep) it answers each COMMAND with a FORCE: the case's rig model (delay, N_com ramp,
-servo, load cell, offset, noise) moves the actuator and the case's pantograph model gives the
-contact force, one step of dt per command. Rig-paced it runs the same models from its own clock
-(drift, jitter): every tick it sends a SAMPLE and uses the newest ANSWER that has come back, counting
-the ticks that had to reuse an old one and timing every answer. Faults are injected on what it
-sends, with a seed: loss, reordering (a datagram sent after the next one), duplication, corruption
-and delay. A session belongs to the address and id that opened it (docs/udp-protocol.md). Its
-counters go to a JSON file when a session ends and when it stops.
+Model-paced (lockstep) it answers each COMMAND with a FORCE: the rig moves the actuator and the
+case's pantograph model gives the contact force, one step of dt per command. The rig is a rig file's
+chain (`--rig FILE`, else the case's `[rig] file`: link delay, N_com decimation, the drive's ramp at
+sub-steps, position loop, motion limits, load-cell low-pass; Paper B sec. 4, Paper D sec. 2), run by
+the same model code as the in-process loop and the rig FMU (`models.hil.rig_loop.case_rig`), or else
+the case's `[rig]` section (delay, N_com ramp, servo, load cell, offset, noise). Rig-paced it runs
+the same models from its own clock (drift, jitter): every tick it sends a SAMPLE and uses the newest
+ANSWER that has come back, counting the ticks that had to reuse an old one and timing every answer.
+Faults are injected on what it sends, with a seed: loss, reordering (a datagram sent after the next
+one), duplication, corruption and delay. A session belongs to the address and id that opened it
+(docs/udp-protocol.md). Its counters go to a JSON file when a session ends and when it stops.
 """
 from __future__ import annotations
 
@@ -26,7 +29,9 @@ from pathlib import Path
 from pantohil.fmus import udp_protocol as proto
 from pantohil.models.case import Case
 from pantohil.models.pantograph.lumped import make_pantograph
-from pantohil.models.rig.chain import Rig
+from pantohil.models.hil.rig_loop import case_rig
+from pantohil.models.rig.drive_chain import RigSpec
+from pantohil.models.rig.drive_chain import latency_steps as chain_latency_steps
 from pantohil.models.storage import write_text_atomic
 
 from .rig_clock import Percentiles, RigClock
@@ -158,11 +163,13 @@ MIN_DT_S, MAX_DT_S = 1e-5, 1.0  # time steps a HELLO may ask for
 
 
 class RigEmulator:
-    """Plays the rig controller for a case over UDP: the case's rig and pantograph in lockstep."""
+    """Plays the rig controller for a case over UDP: the rig (`rig`, a rig file's chain, else the case's)
+    and the case's pantograph, in lockstep or on the rig's own clock (Paper D sec. 2)."""
     def __init__(self, case: Case, listen: tuple[str, int], faults: Faults = Faults(),
                  stats_path: Path | None = None, key: bytes | None = None, session_timeout_s: float = 5.0,
-                 announce=None, pacing: RigPacing = RigPacing()):
+                 announce=None, pacing: RigPacing = RigPacing(), rig: RigSpec | None = None):
         self.case = case
+        self.rig_spec = rig if rig is not None else case.rig_spec
         self.faults = faults
         self.pacing = pacing
         self.key = key
@@ -185,7 +192,7 @@ class RigEmulator:
     def _reset(self, dt: float) -> None:
         c = self.case
         self.dt = dt
-        self.rig = Rig(c.rig, self.dt)
+        self.rig = case_rig(c, dt, self.rig_spec)
         self.pan = make_pantograph(c.pantograph, self.dt, c.reference_height_m())
         self.pan.settle(0.0)
         self._z = self._v = 0.0
@@ -294,7 +301,8 @@ class RigEmulator:
             self.stats.nonfinite += 1
             self._status(peer, msg.session, proto.RIG_FAULT, proto.FAULT_BAD_HELLO)
             return
-        if not MIN_DT_S <= msg.a <= MAX_DT_S or msg.session == 0 or msg.u != self.pacing.mode:
+        if (not MIN_DT_S <= msg.a <= MAX_DT_S or msg.session == 0 or msg.u != self.pacing.mode
+                or self._other_dt(msg.a)):
             self.stats.bad_hello += 1
             faults = proto.FAULT_BAD_HELLO | (proto.FAULT_PACING if msg.u != self.pacing.mode else 0)
             self._status(peer, msg.session, proto.RIG_FAULT, faults, mode=self.pacing.mode)
@@ -305,11 +313,17 @@ class RigEmulator:
             self.stats.sessions += 1
             self.session = Session(self.stats.sessions, peer, msg.session, msg.u, msg.a, time.monotonic(),
                                    paced=PacedState() if msg.u == proto.PACED_BY_RIG else None)
-        latency = self.case.rig.latency_steps(self.dt)
+        latency = (chain_latency_steps(self.rig_spec, self.dt) if self.rig_spec is not None
+                   else self.case.rig.latency_steps(self.dt))
         self._status(peer, msg.session, proto.RIG_READY, latency=latency, mode=msg.u)
         if opening:
             self.announce(f"session {self.session.number} opened by {peer[0]}:{peer[1]} "
                           f"({'rig' if msg.u == proto.PACED_BY_RIG else 'model'}-paced, dt {msg.a:g} s)")
+
+    def _other_dt(self, dt: float) -> bool:
+        """A rig file's chain runs at its own model step: a HELLO asking for another dt is refused."""
+        spec = self.rig_spec
+        return spec is not None and abs(dt - spec.model_step_s) > 1e-6 * spec.model_step_s
 
     def _command(self, msg: proto.Message, peer) -> None:
         """Model-paced (lockstep): one step of the rig and the pantograph per COMMAND, answered by a FORCE."""

@@ -16,7 +16,7 @@ from ..catenary.receptance import CirculantOperator, asm_operator, reduce_harmon
 from ..pantograph.lumped import make_pantograph
 from ..rig.chain import Rig
 from ..rig.compensation import HarmonicCompensation
-from ..rig.drive_chain import RigChain
+from ..rig.drive_chain import RigChain, RigSpec
 from .loop import ConvergenceMonitor, PeriodicHil
 
 LOOP_CONNECTIONS = 4
@@ -42,12 +42,16 @@ def case_iteration(case: Case, delay_steps: int) -> PeriodicHil:
     return PeriodicHil(op, reduce_harmonics(case.z0_samples(), n_h), case.hil_settings(delay_steps), comp)
 
 
-def case_rig(case: Case):
-    """The rig of a case: the chain of its rig file if it names one, else the [rig] section's Rig."""
+def case_rig(case: Case, dt_s: float | None = None, spec: RigSpec | None = None):
+    """The rig of a case at dt_s (default the case's): the chain of `spec` or else of the case's rig file
+    (Paper B sec. 4, Paper D sec. 2), with the case's force offset and noise; else the [rig] section's Rig.
+    The in-process loop and `pantohil rig-emulator` both take their rig from here."""
     r = case.values["rig"]
-    if case.rig_spec is not None:
-        return RigChain(case.rig_spec, case.dt_s, 0.0, 0.0, r["force_offset_N"], r["noise_std_N"], r["noise_seed"])
-    return Rig(case.rig, case.dt_s)
+    dt = case.dt_s if dt_s is None else dt_s
+    spec = case.rig_spec if spec is None else spec
+    if spec is not None:
+        return RigChain(spec, dt, 0.0, 0.0, r["force_offset_N"], r["noise_std_N"], r["noise_seed"])
+    return Rig(case.rig, dt)
 
 
 def run_loop(case: Case, force_limit_N: float | None = None) -> LoopResult:

@@ -238,6 +238,40 @@ def analytic_response(spec: RigSpec, dt_s: float, freqs_hz) -> tuple[np.ndarray,
     return gz, gf
 
 
+def record_spans(spec: RigSpec | None, dt_s: float, samples_per_span: int, minimum: int = 4) -> int:
+    """Spans of a multisine record: whole periods of the rig's clocks against the span (`pattern_spans`
+    unlimited), doubled until there are at least `minimum` (a rig of unknown clocks: `minimum`)."""
+    spans = 1
+    if spec is not None:
+        pattern = _pattern_steps(spec, dt_s)
+        spans = max(1, pattern // math.gcd(pattern, samples_per_span))
+    while spans < minimum:
+        spans *= 2
+    return spans
+
+
+def multisine(samples_per_span: int, n_harmonics: int, total: int, dt_s: float) -> np.ndarray:
+    """A Schroeder multisine of unit amplitude per harmonic over `sqrt(N_h - 1)`, at the harmonics
+    1..N_h-1 of the span (Paper D eqs. 4-8: the kept harmonics), `total` samples from t = 0."""
+    k = np.arange(1, n_harmonics)
+    if not len(k):
+        return np.zeros(total)
+    phase = -np.pi * k * (k - 1) / len(k)  # Schroeder phases: low crest factor
+    t = np.arange(total) * dt_s
+    omega = 2 * np.pi * k / (samples_per_span * dt_s)
+    return np.cos(np.outer(t, omega) + phase).sum(axis=1) / len(k) ** 0.5
+
+
+def harmonic_gains(x: np.ndarray, y: np.ndarray, spans: int, n_harmonics: int) -> np.ndarray:
+    """y / x at the harmonics 1..N_h-1 of the span, from a record of `spans` whole spans (the
+    harmonic k of the span is bin k * spans); 1 at DC (a rig has no drift to compensate)."""
+    g = np.ones(n_harmonics, complex)
+    if n_harmonics > 1:
+        bins = np.arange(1, n_harmonics) * spans
+        g[1:] = np.fft.rfft(y)[bins] / np.fft.rfft(x)[bins]
+    return g
+
+
 def frequency_response(spec: RigSpec, dt_s: float, samples_per_span: int, n_harmonics: int,
                        amplitude_m: float = 1e-3, amplitude_N: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
     """The chain's response at harmonics 0..N_h-1 of the span: the fundamental of a Schroeder multisine
@@ -247,26 +281,15 @@ def frequency_response(spec: RigSpec, dt_s: float, samples_per_span: int, n_harm
     response averaged over their phase within the record (the aliased parts fall above the kept band
     when N_com dt < 1 / (2 f_max))."""
     n = samples_per_span
-    pattern = _pattern_steps(spec, dt_s)
-    spans = max(1, pattern // math.gcd(pattern, n))
-    while spans < 4:
-        spans *= 2
-    k = np.arange(1, n_harmonics)
-    phase = -np.pi * k * (k - 1) / max(len(k), 1)  # Schroeder phases: low crest factor
+    spans = record_spans(spec, dt_s, n)
     total = (spans + 1) * n
-    t = np.arange(total) * dt_s
-    omega = 2 * np.pi * k / (n * dt_s)
-    shape = np.cos(np.outer(t, omega) + phase).sum(axis=1) / max(len(k), 1) ** 0.5 if len(k) else np.zeros(total)
+    shape = multisine(n, n_harmonics, total, dt_s)
     z_in, f_in = amplitude_m * shape, amplitude_N * shape
     chain = RigChain(spec, dt_s)
     out = np.array([chain.step(z, f) for z, f in zip(z_in, f_in, strict=False)])
     rec = slice(n, total)
-    gz, gf = np.ones(n_harmonics, complex), np.ones(n_harmonics, complex)
-    if len(k):
-        bins = k * spans
-        gz[1:] = np.fft.rfft(out[rec, 0])[bins] / np.fft.rfft(z_in[rec])[bins]
-        gf[1:] = np.fft.rfft(out[rec, 1])[bins] / np.fft.rfft(f_in[rec])[bins]
-    return gz, gf
+    return (harmonic_gains(z_in[rec], out[rec, 0], spans, n_harmonics),
+            harmonic_gains(f_in[rec], out[rec, 1], spans, n_harmonics))
 
 
 def _pattern_steps(spec: RigSpec, dt_s: float) -> int:

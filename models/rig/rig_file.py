@@ -74,6 +74,8 @@ def _value(section: str, key: str, raw, typ):
     if typ is list:
         if not isinstance(raw, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in raw):
             raise RigFileError(f"{name}: expected a list of numbers, got {raw!r}")
+        if not all(math.isfinite(v) for v in raw):
+            raise RigFileError(f"{name}: every value must be finite")
         return [float(v) for v in raw]
     if not isinstance(raw, typ) or isinstance(raw, bool):
         raise RigFileError(f"{name}: expected {typ.__name__}, got {raw!r}")
@@ -121,6 +123,9 @@ def _measured(resp: dict) -> MeasuredResponse | None:
     for key, vals in given.items():
         if len(vals) != n:
             raise RigFileError(f"response.{key}: {len(vals)} values for {n} frequencies")
+    freqs = given["frequencies_hz"]
+    if n == 0 or freqs[0] <= 0 or any(b <= a for a, b in zip(freqs, freqs[1:], strict=False)):
+        raise RigFileError("response.frequencies_hz: one or more frequencies > 0, increasing")
     if any(g <= 0 for g in given["height_gain"] + given["force_gain"]):
         raise RigFileError("response: every gain must be > 0")
     z = tuple(
@@ -170,6 +175,8 @@ def _toml_value(v) -> str:
         return "true" if v else "false"
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, float):
+        return repr(float(v))  # a numpy float's repr is not TOML
     return repr(v)
 
 
