@@ -221,7 +221,7 @@ class FixedInterfaceModel:
         d = (1 + 1j * w * self.beta)[:, None] * self.lam[None, :] + c[:, None]
         nB = self.M_qB.shape[1]
         mm = (self.M_qB[:, :, None] * self.M_qB[:, None, :]).reshape(len(self.lam), nB * nB)
-        modal = (mm.T @ np.ascontiguousarray((1.0 / d).T).view(np.float64)).view(np.complex128).T.reshape(-1, nB, nB)
+        modal = ((1.0 / d) @ mm).reshape(-1, nB, nB)
         SB = ((1 + 1j * w * self.beta)[:, None, None] * self.K_BB + c[:, None, None] * self.M_BB
               + 1j * w[:, None, None] * self.C_BB - (c**2)[:, None, None] * modal)
         P = self.bloch(w)

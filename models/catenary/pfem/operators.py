@@ -186,6 +186,10 @@ class _BuildContext:
     low: np.ndarray  # modes kept one by one in the contact functional
     lam_v: np.ndarray  # eigenvalues of the virtual modes that stand for the others
     w_c: np.ndarray  # (n nB) x (low + virtual): phi_p(x_n) M_pb of the contact functional
+    w_v: np.ndarray  # n x (q nB): sum_p l_j(u_p) phi_p(x_n) M_pb, the virtual modes' boundary terms (j, b)
+    phi_hi: np.ndarray  # n x (modes above the cut): phi_p(x_n)
+    basis: np.ndarray  # (modes above the cut) x q: l_j(u_p)
+    wm: np.ndarray  # nd x n x q: sum_p l_j(u_p) phi_p(x_n) phi_p(e_d), the virtual modes' modal terms
     pm_e: np.ndarray  # (nd nB) x r: phi_p(e_d) M_pb of the elongation functional
     phiphi_e: np.ndarray  # r x nd^2: phi_p(e_d) phi_p(e_d')
     lt: LagTransform
@@ -211,19 +215,21 @@ def _build_context(cb: ContactBlock, s: PfemSettings, period: float, J: int,
     else:
         psi_e, phi_e, win = np.zeros((0, nB)), np.zeros((0, r)), np.zeros(0, dtype=int)
     low, lam_v, basis = _virtual_modes(fim.lam, float(omega[-1]), cb.block.alpha, cb.block.beta)
-    m_qb = fim.M_qB
+    m_qb, q = fim.M_qB, len(lam_v)
     w_low = (phi_c[:, None, low] * m_qb[low].T[None]).reshape(n * nB, -1)
     w_virtual = (phi_c[:, None, ~low] * m_qb[~low].T[None]).reshape(n * nB, -1) @ basis
     pm_e = (phi_e[:, None, :] * m_qb.T[None]).reshape(nd * nB, r)
     phiphi_e = (phi_e[:, None, :] * phi_e[None, :, :]).reshape(nd * nd, r).T
-    rows_c = 2 * J - 1
-    sizes = {"g": r, "dc": nd * (r + nB), "cd": nd * rows_c, "dd": nd * nd}
+    wm = np.einsum("np,dp,pj->dnj", phi_c[:, ~low], phi_e[:, ~low], basis, optimize=True)
+    rows_c, r_lo = 2 * J - 1, int(low.sum())
+    sizes = {"g": r_lo + q, "dc": nd * (r_lo + nB + q * nB), "cd": nd * rows_c, "dd": nd * nd}
     ends = np.cumsum(list(sizes.values()))
     cols = {k: slice(int(e - v), int(e)) for (k, v), e in zip(sizes.items(), ends, strict=True)}
     lag0 = 2 * n
     ctx = _BuildContext(fim, psi_c, phi_c, psi_e, phi_e, win, n, nd, nB, r, dt, np.arange(n), lag0, rows_c,
-                        np.mod(np.arange(-(J - 1), J), n), low, lam_v, np.hstack([w_low, w_virtual]), pm_e,
-                        phiphi_e, LagTransform(float(omega[-1]) * dt, lag0), cols, profile)
+                        np.mod(np.arange(-(J - 1), J), n), low, lam_v, np.hstack([w_low, w_virtual]),
+                        w_virtual.reshape(n, nB, q).transpose(0, 2, 1).reshape(n, q * nB), phi_c[:, ~low], basis, wm,
+                        pm_e, phiphi_e, LagTransform(float(omega[-1]) * dt, lag0), cols, profile)
     return omega, w, x, ctx
 
 
@@ -233,12 +239,14 @@ class _FrequencySums:
 
     grid: np.ndarray  # uniform-grid coefficients of every lag function (LagTransform rows x functions)
     H2: np.ndarray  # boundary part: contact harmonics x contact load
+    buffer: np.ndarray  # one chunk's coefficients (frequencies x functions), reused
 
     @classmethod
-    def zeros(cls, ctx: _BuildContext) -> _FrequencySums:
+    def zeros(cls, ctx: _BuildContext, chunk: int) -> _FrequencySums:
         """All sums at zero, sized for the build."""
         n_functions = max(s.stop for s in ctx.cols.values())
-        return cls(np.zeros((ctx.lt.n_rows, n_functions), dtype=complex), np.zeros((ctx.rows_c, ctx.n), dtype=complex))
+        return cls(np.zeros((ctx.lt.n_rows, n_functions), dtype=complex), np.zeros((ctx.rows_c, ctx.n), dtype=complex),
+                   np.zeros((chunk, n_functions), dtype=complex))
 
 
 def _tick(ctx: _BuildContext, key: str, t0: float) -> float:
@@ -247,16 +255,14 @@ def _tick(ctx: _BuildContext, key: str, t0: float) -> float:
     return now
 
 
-def _functionals(ctx: _BuildContext, om: np.ndarray, c: np.ndarray, inv_d: np.ndarray):
+def _functionals(ctx: _BuildContext, c: np.ndarray, inv_d: np.ndarray, inv_dv: np.ndarray):
     """Xi(w, x) = psi(x) - c sum_p phi_p(x) M_pB / d_p (the boundary part of the response functional,
     `FixedInterfaceModel.dynamic_constraint`) at the contact samples (n x n_B x k, the modes above the cut
     through the virtual modes) and at the dropper elongations (nd x n_B x k)."""
-    kc = len(om)
-    d_v = (1 + 1j * om * ctx.fim.beta)[:, None] * ctx.lam_v[None, :] + c[:, None]
-    q = np.concatenate([c[:, None] * inv_d[:, ctx.low], c[:, None] / d_v], axis=1).T
+    kc = len(c)
+    q = np.concatenate([c[:, None] * inv_d[:, ctx.low], c[:, None] * inv_dv], axis=1).T
     xi_c = ctx.psi_c[:, :, None] - _real_times_complex(ctx.w_c, q).reshape(ctx.n, ctx.nB, kc)
-    q_e = (c[:, None] * inv_d).T
-    xi_e = ctx.psi_e[:, :, None] - _real_times_complex(ctx.pm_e, q_e).reshape(ctx.nd, ctx.nB, kc)
+    xi_e = ctx.psi_e[:, :, None] - ((c[:, None] * inv_d) @ ctx.pm_e.T).T.reshape(ctx.nd, ctx.nB, kc)
     return xi_c, xi_e
 
 
@@ -267,7 +273,8 @@ def _accumulate_chunk(ctx: _BuildContext, acc: _FrequencySums, om: np.ndarray, w
     n, nd, nR, rows_c, kc = ctx.n, ctx.nd, ctx.nB // 2, ctx.rows_c, len(om)
     c, dp, S, _ = ctx.fim.coefficients(om)
     inv_d = 1.0 / dp
-    xi_c, xi_e = _functionals(ctx, om, c, inv_d)
+    inv_dv = 1.0 / ((1 + 1j * om * ctx.fim.beta)[:, None] * ctx.lam_v[None, :] + c[:, None])  # virtual modes
+    xi_c, xi_e = _functionals(ctx, c, inv_d, inv_dv)
     t0 = _tick(ctx, "frequency loop: functionals Xi, S", t0)
     E = np.exp(1j * om * ctx.fim.period_s)  # P = [E I; I]: P^T Xi = E Xi_L + Xi_R, P^H Xi = conj(E) Xi_L + Xi_R
     ph = np.exp(1j * np.outer(ctx.ii * ctx.dt, om))  # [n, k]
@@ -280,40 +287,55 @@ def _accumulate_chunk(ctx: _BuildContext, acc: _FrequencySums, om: np.ndarray, w
     y_in = np.conj(ph)[:, None, :] * (np.conj(E) * xi_c[:, :nR] + xi_c[:, nR:])  # unit load at n_hat, its instant
     acc.H2 += U[:, :, :rows_c].transpose(2, 1, 0).reshape(rows_c, nR * kc) @ y_in.reshape(n, nR * kc).T
     t0 = _tick(ctx, "frequency loop: contact boundary part (FFT, 3x3 solves, products)", t0)
-    coef = np.empty((kc, acc.grid.shape[1]), dtype=complex)
-    coef[:, ctx.cols["g"]] = inv_d * wk[:, None]
+    coef = acc.buffer[:kc]  # reused: a fresh array per chunk costs its page faults again
+    coef[:, ctx.cols["g"]] = np.concatenate([inv_d[:, ctx.low], inv_dv], axis=1) * wk[:, None]
     if nd:
-        _dropper_coefficients(ctx, coef, c, inv_d, wk, E, U, xe_in)
+        _dropper_coefficients(ctx, coef, c, inv_d, inv_dv, wk, E, U, xe_in)
     rows, kernel = ctx.lt.spreading(om * ctx.dt)
     acc.grid[rows] += _real_times_complex(kernel, coef)
     _tick(ctx, "frequency loop: lag-function coefficients and spreading", t0)
 
 
-def _dropper_coefficients(ctx: _BuildContext, coef: np.ndarray, c: np.ndarray, inv_d: np.ndarray, wk: np.ndarray,
-                          E: np.ndarray, U: np.ndarray, xe_in: np.ndarray) -> None:
+def _dropper_coefficients(ctx: _BuildContext, coef: np.ndarray, c: np.ndarray, inv_d: np.ndarray, inv_dv: np.ndarray,
+                          wk: np.ndarray, E: np.ndarray, U: np.ndarray, xe_in: np.ndarray) -> None:
     """Per frequency, the coefficients of the dropper lag functions (Paper C eqs. 26-34): contact-to-dropper
     by the terms of the contact functional (modal: w phi_p(e_d) / d_p; boundary: Xi_e^T P S^-1 P^H Xi_c
-    with Xi_c = psi - c sum_p phi_p M_pB / d_p, one function per psi_b and per phi_p), the
-    dropper-to-contact boundary part by contact harmonic, and dropper-to-dropper."""
-    kc, nd, nB, r, rows_c = len(c), ctx.nd, ctx.nB, ctx.r, ctx.rows_c
+    with Xi_c = psi - c sum_p phi_p M_pB / d_p, one function per psi_b, per mode below the cut and per virtual
+    mode and b; the modal part of the modes above the cut comes from the virtual modes' g_j), the
+    dropper-to-contact boundary part by contact harmonic, and dropper-to-dropper. Written in place."""
+    kc, nd, nB, rows_c, low = len(c), ctx.nd, ctx.nB, ctx.rows_c, ctx.low
+    r, q = int(low.sum()), len(ctx.lam_v)
     u3 = U[:, :, rows_c:]  # [k, a, d], weights included
-    u_b = np.concatenate([np.conj(E)[:, None, None] * u3, u3], axis=1)  # conj(P) S^-T P^T Xi_e: [k, b, d]
-    mu = _real_times_complex(ctx.fim.M_qB, u_b.transpose(1, 0, 2).reshape(nB, kc * nd)).reshape(r, kc, nd)
-    c_phi = inv_d[:, None, :] * (wk[:, None, None] * ctx.phi_e[None] - c[:, None, None] * mu.transpose(1, 2, 0))
-    coef[:, ctx.cols["dc"]] = np.concatenate([c_phi, u_b.transpose(0, 2, 1)], axis=2).reshape(kc, nd * (r + nB))
-    coef[:, ctx.cols["cd"]] = -np.matmul(xe_in.transpose(2, 0, 1), U[:, :, :rows_c]).reshape(kc, nd * rows_c)
-    modal = _real_times_complex(ctx.phiphi_e.T, inv_d.T).T  # [k, d d']
+    u_b = np.concatenate([np.conj(E)[:, None, None] * u3, u3], axis=1).transpose(0, 2, 1)  # conj(P) U: [k, d, b]
+    dc = coef[:, ctx.cols["dc"]].reshape(kc, nd, r + nB + q * nB)
+    mu = (u_b.reshape(kc * nd, nB) @ ctx.fim.M_qB[low].T).reshape(kc, nd, r)  # sum_b M_pb U_bd
+    modal = dc[:, :, :r]
+    np.multiply(mu, -c[:, None, None], out=modal)
+    modal += wk[:, None, None] * ctx.phi_e[None, :, low]
+    modal *= inv_d[:, None, low]
+    dc[:, :, r:r + nB] = u_b
+    dc[:, :, r + nB:] = ((-c[:, None] * inv_dv)[:, None, :, None] * u_b[:, :, None, :]).reshape(kc, nd, q * nB)
+    np.matmul(xe_in.transpose(2, 0, 1), U[:, :, :rows_c], out=coef[:, ctx.cols["cd"]].reshape(kc, nd, rows_c))
+    coef[:, ctx.cols["cd"]] *= -1.0
     boundary = np.matmul(u3.transpose(0, 2, 1), xe_in.transpose(2, 1, 0)).reshape(kc, nd * nd)  # [k, observed, loaded]
-    coef[:, ctx.cols["dd"]] = -(wk[:, None] * modal + boundary)
+    coef[:, ctx.cols["dd"]] = -(wk[:, None] * (inv_d @ ctx.phiphi_e) + boundary)
 
 
 def _contact_operator(ctx: _BuildContext, G: np.ndarray, H2: np.ndarray, J: int) -> np.ndarray:
-    """The contact-to-contact operator (unreduced modal part by lag, plus the boundary harmonics), reduced to J."""
-    n, ii, lag0, phi_c = ctx.n, ctx.ii, ctx.lag0, ctx.phi_c
+    """The contact-to-contact operator (unreduced modal part by lag, plus the boundary harmonics), reduced to J:
+    the modes below the cut one lag (diagonal) at a time, sum_p phi_p(x_n) phi_p(x_n-m) g_p(m), those above
+    through the virtual modes, sum_j (sum_p l_j(u_p) phi_p(x_n) phi_p(x_n_hat)) g_j(n - n_hat)."""
+    n, ii, lag0, phi = ctx.n, ctx.ii, ctx.lag0, ctx.phi_c[:, ctx.low]
+    r = phi.shape[1]
     cc1 = np.empty((n, n))
-    for m in range(-(n - 1), n):  # one lag (diagonal) at a time: sum_p phi_p(x_n) phi_p(x_n-m) g_p(m)
-        rows = ii[max(m, 0):n + min(m, 0)]
-        cc1[rows, rows - m] = (phi_c[rows] * phi_c[rows - m]) @ G[:, m + lag0]
+    flat = cc1.reshape(-1)
+    for m in range(-(n - 1), n):
+        a, b = max(m, 0), n + min(m, 0)
+        start = a * n + a - m  # element (a, a - m), then down the diagonal
+        flat[start:start + (b - a) * (n + 1):n + 1] = (phi[a:b] * phi[a - m:b - m]) @ G[:r, m + lag0]
+    toe = ii[:, None] - ii[None, :] + lag0
+    for j in range(len(ctx.lam_v)):
+        cc1 += ((ctx.phi_hi * ctx.basis[:, j]) @ ctx.phi_hi.T) * G[r + j, toe]
     return _reduce(cc1, _combine(H2, J), J, n)
 
 
@@ -344,18 +366,20 @@ def _dropper_operators(ctx: _BuildContext, acc: _FrequencySums, G: np.ndarray, J
     lags = np.arange(-lag0, lag0 + 1)
     f_cd = lt.evaluate(acc.grid[:, ctx.cols["cd"]], lags).reshape(nd, rows_c, len(lags))
     dd_lag = lt.evaluate(acc.grid[:, ctx.cols["dd"]], lags).real.reshape(nd, nd, len(lags))
-    shapes = np.hstack([ctx.phi_c, ctx.psi_c])  # the contact functional's terms, as the dc functions are ordered
+    low, r = ctx.low, int(ctx.low.sum())
+    shapes = np.hstack([ctx.phi_c[:, low], ctx.psi_c, ctx.w_v])  # the contact functional's terms, as the dc functions
     toe = ii[:, None] - ii[None, :] + n - 1  # [row, col] -> row - col + N - 1
     dc = np.empty((n, nd, Jd), dtype=complex)
     cd = np.empty((n, nd, n))
-    per = ctx.r + ctx.nB
+    per = shapes.shape[1]
     for d in range(nd):
         first = ctx.cols["dc"].start + d * per
         L = lt.evaluate(acc.grid[:, first:first + per], np.arange(win[d] - n + 1, win[d] + n)).real
-        Y = shapes @ L  # [n_hat, lag - win_d + N - 1]
+        Y = shapes @ L + ctx.wm[d] @ G[r:, lag0 + win[d] - n + 1:lag0 + win[d] + n]  # [n_hat, lag - win_d + N - 1]
         dc1 = Y[ii[None, :], toe]  # [i, n_hat]: lag win_d + i - n_hat
         dc[:, d, :] = sfft.rfft(dc1, axis=0)[:Jd].T  # Paper D sec. 3.7: N_hd harmonics over the window
-        Y = ctx.phi_c @ (ctx.phi_e[d][:, None] * G[:, lag0 - win[d] - n + 1:lag0 - win[d] + n])
+        g = G[:, lag0 - win[d] - n + 1:lag0 - win[d] + n]
+        Y = ctx.phi_c[:, low] @ (ctx.phi_e[d, low][:, None] * g[:r]) + ctx.wm[d] @ g[r:]
         cd1 = -Y[ii[:, None], toe]  # [n, i']: lag n - t', load = -elongation
         t = win[d] + ii
         red = _reduce(cd1, _combine(f_cd[d][:, lag0 - t], J), J, n)  # [n, i']
@@ -386,7 +410,7 @@ def build_operators(cb: ContactBlock, s: PfemSettings, progress=None, chunk: int
     omega, w, x, ctx = _build_context(cb, s, period, J, profile)
     _tick(ctx, "setup (grid, functionals, virtual modes)", t_start)
     profile["setup (grid, functionals, virtual modes)"] -= profile["fixed-interface model (eigh)"]
-    acc = _FrequencySums.zeros(ctx)
+    acc = _FrequencySums.zeros(ctx, chunk)
     bounds = _chunk_bounds(omega * dt / ctx.lt.h, chunk, span_cells)
     for k0, k1 in zip(bounds[:-1], bounds[1:], strict=False):
         _accumulate_chunk(ctx, acc, omega[k0:k1], w[k0:k1])
