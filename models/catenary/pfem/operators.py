@@ -185,7 +185,7 @@ class _BuildContext:
     harm: np.ndarray  # FFT rows of the contact harmonics -(J-1)..J-1
     low: np.ndarray  # modes kept one by one in the contact functional
     lam_v: np.ndarray  # eigenvalues of the virtual modes that stand for the others
-    w_c: np.ndarray  # (n nB) x (low + virtual): phi_p(x_n) M_pb of the contact functional
+    w_c: np.ndarray  # (n nB) x (low + virtual): phi_p(x_n) M_pb of the contact functional (float32)
     w_v: np.ndarray  # n x (q nB): sum_p l_j(u_p) phi_p(x_n) M_pb, the virtual modes' boundary terms (j, b)
     phi_hi: np.ndarray  # n x (modes above the cut): phi_p(x_n)
     basis: np.ndarray  # (modes above the cut) x q: l_j(u_p)
@@ -227,7 +227,7 @@ def _build_context(cb: ContactBlock, s: PfemSettings, period: float, J: int,
     cols = {k: slice(int(e - v), int(e)) for (k, v), e in zip(sizes.items(), ends, strict=True)}
     lag0 = 2 * n
     ctx = _BuildContext(fim, psi_c, phi_c, psi_e, phi_e, win, n, nd, nB, r, dt, np.arange(n), lag0, rows_c,
-                        np.mod(np.arange(-(J - 1), J), n), low, lam_v, np.hstack([w_low, w_virtual]),
+                        np.mod(np.arange(-(J - 1), J), n), low, lam_v, np.hstack([w_low, w_virtual]).astype(np.float32),
                         w_virtual.reshape(n, nB, q).transpose(0, 2, 1).reshape(n, q * nB), phi_c[:, ~low], basis, wm,
                         pm_e, phiphi_e, LagTransform(float(omega[-1]) * dt, lag0), cols, profile)
     return omega, w, x, ctx
@@ -261,7 +261,8 @@ def _functionals(ctx: _BuildContext, c: np.ndarray, inv_d: np.ndarray, inv_dv: n
     through the virtual modes) and at the dropper elongations (nd x n_B x k)."""
     kc = len(c)
     q = np.concatenate([c[:, None] * inv_d[:, ctx.low], c[:, None] * inv_dv], axis=1).T
-    xi_c = ctx.psi_c[:, :, None] - _real_times_complex(ctx.w_c, q).reshape(ctx.n, ctx.nB, kc)
+    modal = (ctx.w_c @ np.ascontiguousarray(q, dtype=np.complex64).view(np.float32)).view(np.complex64)
+    xi_c = ctx.psi_c[:, :, None] - modal.reshape(ctx.n, ctx.nB, kc)
     xi_e = ctx.psi_e[:, :, None] - ((c[:, None] * inv_d) @ ctx.pm_e.T).T.reshape(ctx.nd, ctx.nB, kc)
     return xi_c, xi_e
 
