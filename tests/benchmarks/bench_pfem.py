@@ -38,12 +38,16 @@ def main() -> None:
         from pantohil.models.catenary.pfem.operator_file import load_operators
 
         case = load_case(case_file)
-        builds = []
+        builds, cpu = [], []
+        load_before = os.getloadavg()
         for _ in range(args.builds):
             for f in (Path(tmp) / "cache" / "operators").glob("*.npz") if (Path(tmp) / "cache").exists() else []:
                 f.unlink()
+            c0 = time.process_time()
             b = ob.case_operators(case, progress=False)
+            cpu.append(time.process_time() - c0)
             builds.append(b.build_s)
+        load_after = os.getloadavg()
         loads = []
         for _ in range(args.loads):
             t0 = time.perf_counter()
@@ -60,6 +64,8 @@ def main() -> None:
               "virtual in the contact functional; profile:")
         for phase, seconds in ops.info.get("profile_s", {}).items():
             print(f"    {phase:<72s} {seconds:6.2f} s")
+        print(f"  CPU time of the process (both threads): median {statistics.median(cpu):.1f} s; load average "
+              f"{load_before[0]:.1f} before the builds, {load_after[0]:.1f} after (2 cores)")
         print(f"load from cache:  median {statistics.median(loads):.2f} s over {len(loads)} (limit 2 s)")
         if args.build_only:
             return
