@@ -54,7 +54,7 @@ def main() -> None:
             b = ob.case_operators(case, progress=False)
             loads.append(time.perf_counter() - t0)
         ops = load_operators(b.path)
-        print(f"benchmark-like case: N = {case.samples_per_span}, {ops.n_droppers} droppers, "
+        print(f"{args.case}: N = {case.samples_per_span}, {ops.n_droppers} droppers, "
               f"{b.n_frequencies} frequencies, {ops.info.get('modes', '?')} modes, file {b.bytes / 1e6:.1f} MB")
         print(f"operator build:   median {statistics.median(builds):.1f} s over {len(builds)} "
               f"({', '.join(f'{t:.1f}' for t in builds)}; limit 10 s; form-finding, build_operators, file)")

@@ -4,14 +4,20 @@ contact-to-contact I_cc, contact-to-dropper I_dc, dropper-to-contact I_cd and dr
 and N_hd harmonics (Paper D sec. 3.5, 3.7).
 
 Each operator entry is the sum of eq. (19) (with the 1/(2 pi) of NOTES.md) over the frequency grid.
-Built without the naive N_c^2 x N_f complex terms:
-- the fixed-interface modal part of the receptance, sum_p phi_p(x) phi_p(y) / d_p(w), is transformed
-  mode by mode into lag functions g_p(m) (one matrix product over the frequency grid for all modes and
-  lags), then summed lag by lag;
+Built without the naive N_c^2 x N_f complex terms (issue 21: about 200 s -> 40 s on a loaded 2-core VM):
+- every sum wanted at whole-sample lags (the fixed-interface modal lag functions g_p(m), contact-to-dropper,
+  the dropper-to-contact boundary part, dropper-to-dropper) is a type-1 non-uniform FFT
+  (`pfem/lag_transform.py`): per frequency, `width` multiply-adds per function instead of one per lag;
+- contact-to-dropper is a sum of lag functions of the contact functional's terms psi_b, phi_p, so no
+  (window x contact sample) product is formed per frequency;
+- the modes above 4/3 w_max enter the contact functional (and the modal lag functions) through a few
+  virtual modes (Chebyshev interpolation of 1 / d_p in 1 / lam_p, `_virtual_modes`);
 - the boundary part, Xi(w, x)^T P S^-1 P^H Xi(w, y), has rank n_R (3 for a catenary); its sum over
-  the contact points is contracted with the output harmonics first (matrix products), so only the
-  2 N_h - 1 harmonics the HIL uses are ever formed. The frequency grid is graded (`pfem.graded_grid`)
-  and the transform tapered near w_max (`spectral_taper`); both are measured departures from Paper C.
+  the contact points is contracted with the output harmonics first (one FFT over the contact samples),
+  so only the 2 N_h - 1 harmonics the HIL uses are ever formed; the contact side and the spreading run
+  in single precision (the operators stay within 5e-7 of the double-precision evaluation; the operator
+  file stores float32). The frequency grid is graded (`pfem.graded_grid`) and the transform tapered near
+  w_max (`spectral_taper`); both are measured departures from Paper C.
 
 Dropper correction forces act in a window of N samples per dropper, centred on the instant the
 pantograph passes it (dropper d of the next block while the pantograph approaches, of the previous
