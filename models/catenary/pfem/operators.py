@@ -273,6 +273,14 @@ def _functionals(ctx: _BuildContext, c: np.ndarray, inv_d: np.ndarray, inv_dv: n
     return xi_c, xi_e
 
 
+def _phases(x: np.ndarray, n: int) -> np.ndarray:
+    """exp(i x_k m) for m = 0..n-1 (rows), complex64, from sqrt(n) + n / sqrt(n) exponentials per x_k."""
+    b = int(np.ceil(np.sqrt(n)))
+    low = np.exp(1j * np.outer(np.arange(b), x)).astype(np.complex64)
+    high = np.exp(1j * np.outer(np.arange(0, n, b), x)).astype(np.complex64)
+    return (high[:, None, :] * low[None, :, :]).reshape(-1, len(x))[:n]
+
+
 def _accumulate_chunk(ctx: _BuildContext, acc: _FrequencySums, om: np.ndarray, wk: np.ndarray) -> None:
     """Add one chunk of frequencies (eq. 19): the contact boundary part Xi^T P S^-1 P^H Xi reduced to the
     output harmonics, and the coefficients of every lag function, spread onto the lag transform's grid."""
@@ -285,7 +293,7 @@ def _accumulate_chunk(ctx: _BuildContext, acc: _FrequencySums, om: np.ndarray, w
     t0 = _tick(ctx, "frequency loop: functionals Xi, S", t0)
     E = np.exp(1j * om * ctx.fim.period_s)  # P = [E I; I]: P^T Xi = E Xi_L + Xi_R, P^H Xi = conj(E) Xi_L + Xi_R
     e32 = E.astype(np.complex64)  # the contact side in complex64 (measured: operators within 1e-6)
-    ph = np.exp(1j * np.outer(ctx.ii * ctx.dt, om)).astype(np.complex64)  # [n, k]
+    ph = _phases(om * ctx.dt, n)  # exp(i w_k n dt) [n, k]
     x_out = e32 * xi_c[:, :nR] + xi_c[:, nR:]
     a_c = sfft.fft(ph[:, None, :] * x_out, axis=0, workers=-1)[ctx.harm]  # contact harmonics [j, a, k]
     xe_in = np.conj(E) * xi_e[:, :nR] + xi_e[:, nR:]
