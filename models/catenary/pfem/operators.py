@@ -4,7 +4,7 @@ contact-to-contact I_cc, contact-to-dropper I_dc, dropper-to-contact I_cd and dr
 and N_hd harmonics (Paper D sec. 3.5, 3.7).
 
 Each operator entry is the sum of eq. (19) (with the 1/(2 pi) of NOTES.md) over the frequency grid.
-Built without the naive N_c^2 x N_f complex terms (issue 21: about 200 s -> 40 s on a loaded 2-core VM):
+Built without the naive N_c^2 x N_f complex terms (issue 21: 216 s -> 35 s on a loaded 2-core VM, 85 -> 14 s CPU):
 - every sum wanted at whole-sample lags (the fixed-interface modal lag functions g_p(m), contact-to-dropper,
   the dropper-to-contact boundary part, dropper-to-dropper) is a type-1 non-uniform FFT
   (`pfem/lag_transform.py`): per frequency, `width` multiply-adds per function instead of one per lag;
