@@ -25,8 +25,8 @@ class LagTransform:
         self.beta = 2.3 * width
         self.l0 = -(width // 2) - 1
         self.l1 = int(np.ceil(x_max / self.h)) + width // 2 + 1
-        if self.l1 - self.l0 + 1 > self.M // 2:
-            raise ValueError("lag transform: the frequency range exceeds half the transform's period")
+        if self.l1 - self.l0 + 1 > self.M:
+            raise ValueError("lag transform: the frequency range exceeds the transform's period")
         nodes, weights = np.polynomial.legendre.leggauss(4 * width + 16)
         self._quad = (nodes * width / 2, weights * width / 2)
 
