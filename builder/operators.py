@@ -18,6 +18,7 @@ from pantohil.models.catenary.fe import definition as catenary_definition
 from pantohil.models.catenary.fe import model as fe_model
 from pantohil.models.catenary.pfem import blocks as pfem_blocks
 from pantohil.models.catenary.pfem import frf as pfem_frf
+from pantohil.models.catenary.pfem import lag_transform as pfem_lag_transform
 from pantohil.models.catenary.pfem import operator_file
 from pantohil.models.catenary.pfem import operators as pfem_operators
 from pantohil.models.case import Case
@@ -28,7 +29,7 @@ from pantohil.models.catenary.pfem.operators import build_operators
 from pantohil.models.storage import cache_root
 
 
-SOURCES = (pfem_frf, pfem_blocks, pfem_operators, fe_model, catenary_definition, operator_file)
+SOURCES = (pfem_frf, pfem_lag_transform, pfem_blocks, pfem_operators, fe_model, catenary_definition, operator_file)
 
 
 @dataclass
@@ -49,7 +50,7 @@ class OperatorBuild:
 
 def operator_key(case: Case) -> str:
     """Cache key of a case's operators: a hash of the catenary file, the model sources and the settings."""
-    h = hashlib.sha256(f"pantohil operators v{FORMAT_VERSION}".encode())
+    h = hashlib.sha256(f"pantohil operators v{FORMAT_VERSION} numerics {pfem_operators.NUMERICS_VERSION}".encode())
     h.update(Path(case.definition_path).read_bytes())
     for module in SOURCES:
         h.update(Path(module.__file__).read_bytes())

@@ -219,9 +219,11 @@ class FixedInterfaceModel:
         w = np.asarray(omega, dtype=float)
         c = 1j * w * self.alpha - w**2
         d = (1 + 1j * w * self.beta)[:, None] * self.lam[None, :] + c[:, None]
+        nB = self.M_qB.shape[1]
+        mm = (self.M_qB[:, :, None] * self.M_qB[:, None, :]).reshape(len(self.lam), nB * nB)
+        modal = ((1.0 / d) @ mm).reshape(-1, nB, nB)
         SB = ((1 + 1j * w * self.beta)[:, None, None] * self.K_BB + c[:, None, None] * self.M_BB
-              + 1j * w[:, None, None] * self.C_BB
-              - (c**2)[:, None, None] * np.einsum("pa,kp,pb->kab", self.M_qB, 1.0 / d, self.M_qB))
+              + 1j * w[:, None, None] * self.C_BB - (c**2)[:, None, None] * modal)
         P = self.bloch(w)
         S = np.conj(np.transpose(P, (0, 2, 1))) @ SB @ P
         return c, d, S, P
