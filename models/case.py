@@ -216,13 +216,15 @@ class Case:
             return 1
         return chain_pattern_spans(self.rig_spec, self.dt_s, self.samples_per_span)
 
-    def rig_response(self) -> tuple[np.ndarray, np.ndarray]:
-        """The rig's gains at the kept harmonics: the rig file's measured response, else its model's."""
+    def rig_response(self, n_harmonics: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The rig's gains at the kept harmonics (or at harmonics 0..n_harmonics-1): the rig file's measured
+        response, else its model's."""
+        n_h = self.n_harmonics if n_harmonics is None else n_harmonics
         if self.rig_spec.measured is not None:
-            freqs = np.arange(self.n_harmonics) / (self.samples_per_span * self.dt_s)
+            freqs = np.arange(n_h) / (self.samples_per_span * self.dt_s)
             gz, gf = self.rig_spec.measured.at(freqs[1:])
             return np.concatenate([[1.0], gz]), np.concatenate([[1.0], gf])
-        return frequency_response(self.rig_spec, self.dt_s, self.samples_per_span, self.n_harmonics)
+        return frequency_response(self.rig_spec, self.dt_s, self.samples_per_span, n_h)
 
     def pfem_settings(self):
         """The discretisation of this case's PFEM operators (Paper C sec. 3, Paper D sec. 3.5/3.7)."""
