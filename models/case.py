@@ -243,7 +243,7 @@ class Case:
     def hil_settings(self, delay_steps: int) -> HilSettings:
         """The case's HIL settings with delay advance D = delay_steps (Paper D sec. 3)."""
         return HilSettings(update=self.hil_update, relaxation=self.relaxation, delay_steps=delay_steps,
-                           ramp_steps=self.ramp_steps)
+                           ramp_steps=self.ramp_steps, hold_steps=self.hold_steps)
 
     def sample_positions_m(self) -> np.ndarray:
         """Position x of the contact point at each of the N samples of a span [m]."""
@@ -259,13 +259,20 @@ class Case:
         h0 = float(np.real(receptance_direct(self.catenary, 0.0, self.speed_m_s)))
         return float(np.mean(self.z0_samples())) + h0 * self.pantograph.uplift_force_N
 
+    @property
+    def hold_steps(self) -> int:
+        """The extra loop delay E of hil.hold_steps [steps] (Paper D sec. 4)."""
+        return int(self.values["hil"].get("hold_steps", 0))
+
     def delay_steps(self, loop_steps: int) -> int:
-        """Delay advance D = loop latency of the master's connections + the rig's latency."""
+        """Delay advance D = loop latency of the master's connections + the extra delay E + the rig's latency."""
         if self.delay_override is not None:
             return self.delay_override
-        if not self.delay_compensation or self.compensates_rig_response:
-            return loop_steps  # the rig's own delays are in its compensated response
-        return loop_steps + self.rig_latency_steps()
+        if not self.delay_compensation:
+            return loop_steps
+        if self.compensates_rig_response:
+            return loop_steps + self.hold_steps  # the rig's own delays are in its compensated response
+        return loop_steps + self.hold_steps + self.rig_latency_steps()
 
 
 def mean_force_en50367(speed_kmh: float) -> float:
