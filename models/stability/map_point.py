@@ -109,7 +109,7 @@ def rig_problem_for(case, update: str, pantograph: PantographParameters, n_harmo
     if case.compensates_rig_response:
         gz, gf = case.rig_response(n_harmonics)
     d = case.delay_steps(LOOP_CONNECTIONS) if delay_steps is None else int(delay_steps)
-    loop = RigLoop(linear_pantograph(pantograph, case.dt_s), case.rig_spec, case.dt_s, d, gz, gf)
+    loop = RigLoop(linear_pantograph(pantograph, case.dt_s), case.rig_spec, case.dt_s, d, gz, gf, case.hold_steps)
     return RigLoopProblem(update, loop, n_harmonics, kernel=kernel, I_cc=I_cc)
 
 

@@ -75,6 +75,7 @@ class RigLoop:
     delay_steps: int
     height_gains: np.ndarray | None = None  # G_z at harmonics 0..N_h-1 (compensated: A = G_z^-1)
     force_gains: np.ndarray | None = None  # G_f (B = G_f^-1)
+    hold_steps: int = 0  # E: the catenary's commands leave E steps late (extra loop delay, Paper D sec. 4)
 
     def chain_at(self, step: int) -> RigChain | None:
         """The linear rig chain with its clocks at global step `step` (as in a run started at step 0)."""
@@ -107,6 +108,7 @@ class _Plant:
         self.p, self.chain = loop.pantograph, chain
         self.cmd, self.act, self.meas, self.f = (X[blocks[k]][0].copy() for k in ("cmd", "act", "meas", "f"))
         self.x = X[blocks["pantograph"]].copy()
+        self.held = [row.copy() for row in X[blocks["held"]]]
         if chain is not None:
             chain.set_state([row.copy() for row in X[blocks["rig"]]])
 
@@ -119,16 +121,21 @@ class _Plant:
         p = self.p
         self.x = p.Pp @ self.x + np.outer(p.pz, self.act) + np.outer(p.pf, self.f)
         self.f = p.c @ self.x + p.cz * self.act
+        if self.held:  # the extra loop delay E: the command leaves E steps late
+            self.held.append(command)
+            command = self.held.pop(0)
         self.cmd, self.act, self.meas = command, act_new, meas_new
 
     def rows(self) -> list:
         """The plant's rows of the next state, in the layout's order."""
         rig = [np.vstack(self.chain.state())] if self.chain is not None and self.chain.state() else []
-        return [self.cmd[None], self.act[None], self.meas[None], self.f[None], self.x, *rig]
+        held = [np.vstack(self.held)] if self.held else []
+        return [self.cmd[None], self.act[None], self.meas[None], self.f[None], self.x, *rig, *held]
 
 
 def _plant_sizes(loop: RigLoop) -> dict:
-    return {"cmd": 1, "act": 1, "meas": 1, "f": 1, "pantograph": loop.pantograph.size, "rig": loop.rig_size()}
+    return {"cmd": 1, "act": 1, "meas": 1, "f": 1, "pantograph": loop.pantograph.size, "rig": loop.rig_size(),
+            "held": loop.hold_steps}
 
 
 @dataclass
