@@ -30,7 +30,7 @@ from . import loader
 from .operators import case_operators
 from .system import FMU_NAMES, loop_latency_steps
 
-BUILDER_VERSION = "12"
+BUILDER_VERSION = "13"
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}

@@ -110,7 +110,8 @@ class PantohilCatenary(PantohilSlave):
         n = int(self.samples_per_span)
         self.harmonics = harmonic_count(self.max_frequency_hz, n, self.time_step)
         settings = HilSettings(update=UPDATES[self.hil_update], relaxation=self.relaxation,
-                               delay_steps=self.delay_steps, ramp_steps=self.ramp_steps)
+                               delay_steps=self.delay_steps, ramp_steps=self.ramp_steps,
+                               hold_steps=int(self.hold_steps))
         comp = self._compensation(n) if self.rig_compensation == 1 else None
         if self.catenary_model == 1:
             ops = load_operators(Path(self.resources) / OPERATOR_FILE)

@@ -216,13 +216,15 @@ class Case:
             return 1
         return chain_pattern_spans(self.rig_spec, self.dt_s, self.samples_per_span)
 
-    def rig_response(self) -> tuple[np.ndarray, np.ndarray]:
-        """The rig's gains at the kept harmonics: the rig file's measured response, else its model's."""
+    def rig_response(self, n_harmonics: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The rig's gains at the kept harmonics (or at harmonics 0..n_harmonics-1): the rig file's measured
+        response, else its model's."""
+        n_h = self.n_harmonics if n_harmonics is None else n_harmonics
         if self.rig_spec.measured is not None:
-            freqs = np.arange(self.n_harmonics) / (self.samples_per_span * self.dt_s)
+            freqs = np.arange(n_h) / (self.samples_per_span * self.dt_s)
             gz, gf = self.rig_spec.measured.at(freqs[1:])
             return np.concatenate([[1.0], gz]), np.concatenate([[1.0], gf])
-        return frequency_response(self.rig_spec, self.dt_s, self.samples_per_span, self.n_harmonics)
+        return frequency_response(self.rig_spec, self.dt_s, self.samples_per_span, n_h)
 
     def pfem_settings(self):
         """The discretisation of this case's PFEM operators (Paper C sec. 3, Paper D sec. 3.5/3.7)."""
@@ -241,7 +243,7 @@ class Case:
     def hil_settings(self, delay_steps: int) -> HilSettings:
         """The case's HIL settings with delay advance D = delay_steps (Paper D sec. 3)."""
         return HilSettings(update=self.hil_update, relaxation=self.relaxation, delay_steps=delay_steps,
-                           ramp_steps=self.ramp_steps)
+                           ramp_steps=self.ramp_steps, hold_steps=self.hold_steps)
 
     def sample_positions_m(self) -> np.ndarray:
         """Position x of the contact point at each of the N samples of a span [m]."""
@@ -257,13 +259,20 @@ class Case:
         h0 = float(np.real(receptance_direct(self.catenary, 0.0, self.speed_m_s)))
         return float(np.mean(self.z0_samples())) + h0 * self.pantograph.uplift_force_N
 
+    @property
+    def hold_steps(self) -> int:
+        """The extra loop delay E of hil.hold_steps [steps] (Paper D sec. 4)."""
+        return int(self.values["hil"].get("hold_steps", 0))
+
     def delay_steps(self, loop_steps: int) -> int:
-        """Delay advance D = loop latency of the master's connections + the rig's latency."""
+        """Delay advance D = loop latency of the master's connections + the extra delay E + the rig's latency."""
         if self.delay_override is not None:
             return self.delay_override
-        if not self.delay_compensation or self.compensates_rig_response:
-            return loop_steps  # the rig's own delays are in its compensated response
-        return loop_steps + self.rig_latency_steps()
+        if not self.delay_compensation:
+            return loop_steps
+        if self.compensates_rig_response:
+            return loop_steps + self.hold_steps  # the rig's own delays are in its compensated response
+        return loop_steps + self.hold_steps + self.rig_latency_steps()
 
 
 def mean_force_en50367(speed_kmh: float) -> float:

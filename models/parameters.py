@@ -208,6 +208,9 @@ class HilSection:
     delay_steps: int = param(AUTO, "1", "delay advance D [steps]; \"auto\": the loop latency of the master plus "
                                         "the rig's (Paper D sec. 3.4)", 0, 100_000, fmu="catenary", auto=True,
                              fmu_start=1)
+    hold_steps: int = param(0, "1", "extra loop delay E [steps]: the catenary sends each height E steps after "
+                                    "computing it and D grows by E, so that the loop's total delay falls in a "
+                                    "stable zone (Paper D sec. 4, Fig. 7)", 0, 100_000, fmu="catenary")
     rig_compensation: str = param("response", "1", "with a rig file: compensate its frequency response at the kept "
                                                    "harmonics (\"response\"), or only its latency in whole steps "
                                                    "(\"delay\")", choices=("response", "delay"))

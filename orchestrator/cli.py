@@ -231,8 +231,8 @@ def _add_stability_command(sub) -> None:
                       "(A:B:N, A:B:N:log, A,B,C or A; default: the case's)")
     stab.add_argument("--contact-stiffness", metavar="A:B:N", help="penalty contact stiffness k_c [N/m] "
                       "(default: the case's)")
-    stab.add_argument("--delay", metavar="A:B:N", help="loop delay D [steps], compensated in full "
-                      "(default: the case's latency and advance)")
+    stab.add_argument("--delay", metavar="A:B:N", help="loop delay D [steps], compensated in full; with a rig "
+                      "file, the advance D with the rig's chain in the loop (default: the case's latency and advance)")
     stab.add_argument("--relaxation", type=number(0.0, 2.0), help="fix mu_c instead of searching the best one")
     stab.add_argument("--out", type=Path, required=True, help="folder for stability.csv, maps and summary.json")
     stab.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: a LocalCluster)")

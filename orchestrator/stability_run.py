@@ -3,7 +3,9 @@ stiffness and the delay, with the best relaxation at every point (Paper D sec. 4
 
 One Dask task per (f_max, delay) row computes every contact stiffness of the row (the operator is built
 once per row). The delay D is the loop latency, compensated in full (Paper D sec. 3.4); without --delay
-the case's own latency and advance are used (master connections + rig).
+the case's own latency and advance are used (master connections + rig). A case with a rig file has the
+rig's chain in the map (models/stability/rig_map.py: its decimation, drive ramp, position loop and filter,
+with their compensation at the kept harmonics), and D is the advance alone.
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ import numpy as np
 from pantohil.models.case import Case, CaseError, load_case
 from pantohil.models.catenary.receptance import asm_operator, harmonic_count, reduce_harmonics
 from pantohil.models.stability.map_point import (best_relaxation, contact_frequency_hz, problem_for,
-                                           with_contact_stiffness)
+                                                 rig_problem_for, with_contact_stiffness)
 from pantohil.models.storage import atomic_path
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
@@ -94,11 +96,15 @@ def stability_row(task: dict) -> list[dict]:
     t0 = time.perf_counter()
     case = load_case(task["case"], task["overrides"])
     kernel, I_cc = _operator(case, task["f_max_hz"])
+    nh = harmonic_count(task["f_max_hz"], case.samples_per_span, case.dt_s)
     rows = []
     for kc in task["contact_stiffness_N_m"]:
         pan = with_contact_stiffness(case.pantograph, kc)
-        pb = problem_for(task["update"], pan, case.dt_s, task["latency_steps"], task["delay_steps"], kernel=kernel,
-                         I_cc=I_cc)
+        if case.rig_spec is not None:  # the rig file's chain in the loop (models/stability/rig_map.py)
+            pb = rig_problem_for(case, task["update"], pan, nh, task["delay_steps"], kernel=kernel, I_cc=I_cc)
+        else:
+            pb = problem_for(task["update"], pan, case.dt_s, task["latency_steps"], task["delay_steps"],
+                             kernel=kernel, I_cc=I_cc)
         if task["relaxation"] is None:
             mu, rho = best_relaxation(pb)
         else:
@@ -123,7 +129,8 @@ def _frequency_and_stiffness_axes(case: Case, f_max_hz: np.ndarray | None,
 
 
 def _delay_latency_pairs(case: Case, delay_steps: np.ndarray | None) -> list[tuple[int, int]]:
-    """The (delay, latency) pairs of the map: the case's own without --delay, else each D compensating D."""
+    """The (delay, latency) pairs of the map: the case's own without --delay, else each D compensating D.
+    With a rig file the latency is the rig chain's own (in the map) and D the advance alone."""
     plan = delay_plan(case)
     if delay_steps is None:
         pairs = [(plan["delay_steps"], plan["loop_latency_steps"] + plan["rig_latency_steps"])]
@@ -148,6 +155,9 @@ def _map_summary(case: Case, update: str, rows: list[dict], tasks: list[dict], n
         "contact_frequency_hz_at_case_kc": float(contact_frequency_hz(case.pantograph,
                                                                       case.pantograph.contact_stiffness_N_m)),
         "relaxation": "best found" if relaxation is None else relaxation,
+        "rig": None if case.rig_spec is None else {
+            "file": case.rig_spec.name, "in_map": "its chain (models/stability/rig_map.py)",
+            "compensation": "response" if case.compensates_rig_response else "delay"},
         "timing": {"map_s": t_map, "wall_s": time.perf_counter() - t0,
                    "per_point_s": t_map / max(len(rows), 1) * max(n_workers, 1)},
         "figures": figures,

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from pantohil.models.hil.loop import UPDATES, HilSettings
+from pantohil.models.hil.loop import UPDATES, HilSettings, hold
 from pantohil.models.catenary.pfem.operators import PfemOperators
 from pantohil.models.catenary.receptance import reduce_harmonics
 
@@ -43,6 +43,7 @@ class PfemHil:
         self.last_force = np.zeros(n)
         self.comp = compensation
         self.force_estimate = self.last_force if compensation is None else np.zeros(n)  # B f: the true force
+        self._held: list = []  # commands in flight through the extra loop delay E
         jd = ops.settings.n_harmonics_dropper
         # elongations as the real and imaginary parts of their harmonics over the window index, so that
         # one step is a few small real products
@@ -118,7 +119,7 @@ class PfemHil:
         self.k += 1
         if self.s.ramp_steps > 0 and self.k < self.s.ramp_steps:
             command *= self.k / self.s.ramp_steps
-        return float(command)
+        return float(hold(self._held, command, self.s.hold_steps))
 
     @property
     def correction(self) -> np.ndarray:

@@ -22,6 +22,18 @@ class HilSettings:
     relaxation: float = 0.1  # mu_c, Paper D eq. (9)-(10)
     delay_steps: int = 1  # D: 1 is the unavoidable one-step loop (Paper D Fig. 4)
     ramp_steps: int = 0  # N_r, Paper D sec. 3.6
+    hold_steps: int = 0  # E: extra loop delay, the command leaves E steps after it is computed (Paper D sec. 4)
+
+
+def hold(line: list, command: float, steps: int) -> float:
+    """The command computed `steps` steps ago (the extra loop delay E of Paper D sec. 4, Fig. 7); `line`
+    holds the commands in flight, filled with the first one."""
+    if steps <= 0:
+        return command
+    if not line:
+        line.extend([command] * steps)
+    line.append(command)
+    return line.pop(0)
 
 
 class PeriodicHil:
@@ -50,6 +62,7 @@ class PeriodicHil:
         self.last_force = np.zeros(self.n)  # the force in use at each sample (measured, or kept when lost)
         self.comp = compensation
         self.force_estimate = self.last_force if compensation is None else np.zeros(self.n)  # B f: the true force
+        self._held: list = []  # commands in flight through the extra loop delay E
 
     @property
     def sample(self) -> int:
@@ -97,7 +110,7 @@ class PeriodicHil:
         self.k += 1
         if self.s.ramp_steps > 0 and self.k < self.s.ramp_steps:
             command *= self.k / self.s.ramp_steps
-        return float(command)
+        return float(hold(self._held, command, self.s.hold_steps))
 
     def command_at(self, z: np.ndarray, target: int) -> float:
         """The height to command for sample `target`: z there, or (A z) there with the rig compensated."""

@@ -3,7 +3,7 @@
 catenary -> rig -> pantograph -> rig -> catenary with Jacobi stepping: at step k every block gets
 the outputs of step k-1 (one step per connection, 4 in the loop), as `orchestrator.master` steps
 the three FMUs. It runs the same model classes as the FMUs, so it gives the same iteration without
-building them: for studies of rig compensation and for tests.
+building them: for studies of rig compensation and for tests (a PFEM case on operators its caller loads).
 """
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from ..pantograph.lumped import make_pantograph
 from ..rig.chain import Rig
 from ..rig.compensation import HarmonicCompensation
 from ..rig.drive_chain import RigChain, RigSpec
+from .droppers import PfemHil
 from .loop import ConvergenceMonitor, PeriodicHil
 
 LOOP_CONNECTIONS = 4
@@ -31,13 +32,18 @@ class LoopResult:
     history: list
 
 
-def case_iteration(case: Case, delay_steps: int) -> PeriodicHil:
-    """The catenary FMU's iteration for an ASM case (with the rig's response compensated if the case says so)."""
+def case_iteration(case: Case, delay_steps: int, operators=None):
+    """The catenary FMU's iteration for an ASM case, or for a PFEM case on its `operators` (PfemOperators,
+    built by the caller), with the rig's response compensated if the case says so."""
     n, n_h = case.samples_per_span, case.n_harmonics
+    comp = HarmonicCompensation(n, *case.rig_response()) if case.compensates_rig_response else None
+    if case.model == "pfem":
+        if operators is None:
+            raise ValueError("a PFEM case runs in process on its operators (builder.operators.case_operators)")
+        p = case.values["pfem"]
+        return PfemHil(operators, case.hil_settings(delay_steps), p["dropper_relaxation"], p["droppers"], comp)
     op = asm_operator(case.catenary, case.speed_m_s, n, case.dt_s, n_h)
-    comp = None
-    if case.compensates_rig_response:
-        comp = HarmonicCompensation(n, *case.rig_response())
+    if comp is not None:
         op = CirculantOperator(comp.compensate_kernel(op.kernel))
     return PeriodicHil(op, reduce_harmonics(case.z0_samples(), n_h), case.hil_settings(delay_steps), comp)
 
@@ -54,12 +60,13 @@ def case_rig(case: Case, dt_s: float | None = None, spec: RigSpec | None = None)
     return Rig(case.rig, dt)
 
 
-def run_loop(case: Case, force_limit_N: float | None = None) -> LoopResult:
+def run_loop(case: Case, force_limit_N: float | None = None, operators=None) -> LoopResult:
     """Run the case's loop until the span-to-span change is below run.convergence_tol (after the ramp),
-    the force leaves run.force_limit_N, or run.max_spans."""
+    the force leaves run.force_limit_N or its change stays above run.divergence_change (diverged, as the FMU
+    master decides), or run.max_spans (a PFEM case on its `operators`)."""
     run = case.values["run"]
     n = case.samples_per_span
-    hil = case_iteration(case, case.delay_steps(LOOP_CONNECTIONS))
+    hil = case_iteration(case, case.delay_steps(LOOP_CONNECTIONS), operators)
     rig = case_rig(case)
     pan = make_pantograph(case.pantograph, case.dt_s, case.reference_height_m())
     monitor = ConvergenceMonitor(n, case.rig_period_spans())
@@ -80,5 +87,9 @@ def run_loop(case: Case, force_limit_N: float | None = None) -> LoopResult:
         rec = monitor.close_span(span, used)
         if (span + 1) * n >= case.ramp_steps and rec["change"] <= run["convergence_tol"]:
             status = "converged"
+            break
+        first = -(-case.ramp_steps // n) + 1  # the FMU master's test: a limit cycle that contact loss bounds
+        if monitor.diverging(run["divergence_spans"], run["divergence_change"], first) is not None:
+            status = "diverged"
             break
     return LoopResult(status, span + 1, used.copy(), monitor.history)

@@ -96,10 +96,13 @@ class DiscreteFilter:
         a0 = float(a[0])
         self.b = [float(v) / a0 for v in b]
         self.a = [float(v) / a0 for v in a]
-        self.state = [float(v) for v in signal.lfilter_zi(self.b, self.a) * initial]
+        order = max(len(self.a), len(self.b)) - 1
+        self.state = [float(v) for v in signal.lfilter_zi(self.b, self.a) * initial] if order else []
 
     def __call__(self, x: float) -> float:
         b, a, s = self.b, self.a, self.state
+        if not s:  # a pure gain (no filter)
+            return b[0] * x
         y = b[0] * x + s[0]
         last = len(s) - 1
         for i in range(len(s)):
@@ -128,30 +131,43 @@ def _servo_transition(wn: float, zeta: float, h_ns: int) -> tuple[np.ndarray, np
 
 
 class _Drive:
-    """Decimated references, the linear ramp at sub-steps, the motion profile and the position loop."""
+    """Decimated references, the linear ramp at sub-steps, the motion profile and the position loop.
 
-    def __init__(self, spec: RigSpec, dt_s: float, z0: float):
+    With `limited` False the motion profile is left out: the drive is then linear in its inputs and its
+    signals may be arrays (the rows of a state basis, for the stability map)."""
+
+    def __init__(self, spec: RigSpec, dt_s: float, z0, limited: bool = True):
         hp = spec.height
         self.hp, self.dt, self.ramp = hp, dt_s, spec.ramp_s
         self.tau = hp.sub_step_s
         self.z_old = self.z_new = self.u = z0
         self.t_arrival = -1.0
         self.k = 0
-        self.limiter = Limiter(spec.limits, self.tau or dt_s, z0)
+        self.limiter = Limiter(spec.limits, self.tau or dt_s, z0) if limited else None
         self.wn = 2 * math.pi * hp.servo_frequency_hz
-        self.x = np.array([z0, 0.0])
+        self.pos, self.vel = z0, 0.0 * z0  # the position loop's state
         self.tick = 0  # sub-references emitted so far (the drive's own clock)
 
-    def _ramp_at(self, t: float) -> float:
+    STATE = ("z_old", "z_new", "u", "pos", "vel")  # what the drive remembers between steps (linear part)
+
+    def state_names(self) -> tuple:
+        """The drive's state variables that its next steps use (the position loop's only if there is one)."""
+        return self.STATE if self.wn > 0 else self.STATE[:3]
+
+    def _ramp_at(self, t: float):
         frac = min(max((t - self.t_arrival) / self.ramp, 0.0), 1.0)
         return self.z_old + (self.z_new - self.z_old) * frac
+
+    def _reference(self, z):
+        return z if self.limiter is None else self.limiter(z)[0]
 
     def _advance(self, h: float) -> None:
         if self.wn > 0 and h > 0:
             phi, gam = _servo_transition(self.wn, self.hp.servo_damping, int(round(h * 1e12)))
-            self.x = phi @ self.x + gam * self.u
+            self.pos, self.vel = (phi[0, 0] * self.pos + phi[0, 1] * self.vel + gam[0] * self.u,
+                                  phi[1, 0] * self.pos + phi[1, 1] * self.vel + gam[1] * self.u)
 
-    def step(self, z: float) -> float:
+    def step(self, z):
         t0 = self.k * self.dt
         if self.k % self.hp.decimation == 0:  # a new reference reaches the drive (Paper B sec. 4)
             self.z_old, self.z_new, self.t_arrival = self.z_new, z, t0
@@ -159,32 +175,54 @@ class _Drive:
         t1 = self.k * self.dt
         if self.tau <= 0:
             self._advance(t1 - t0)
-            self.u = self.limiter(self._ramp_at(t1))[0]
+            self.u = self._reference(self._ramp_at(t1))
         else:
             t = t0
             while (self.tick + 1) * self.tau <= t1 + 1e-12:  # sub-references inside this step
                 self.tick += 1
                 ts = self.tick * self.tau
                 self._advance(ts - t)
-                self.u, t = self.limiter(self._ramp_at(ts))[0], ts
+                self.u, t = self._reference(self._ramp_at(ts)), ts
             self._advance(t1 - t)
-        return float(self.x[0]) if self.wn > 0 else self.u
+        return self.pos if self.wn > 0 else self.u
 
 
 class RigChain:
-    """A rig file's chain at the model's dt. `step(z_command, f_true)` -> (actuator height, measured force)."""
+    """A rig file's chain at the model's dt. `step(z_command, f_true)` -> (actuator height, measured force).
+
+    `linear=True`: without the motion profile's limits, the offset and the noise, the chain is linear and
+    its signals may be arrays; `state()` and `set_state()` then read and write everything it remembers
+    between steps (its clocks aside), for the span-to-span map of models/stability/rig_map.py."""
 
     def __init__(self, spec: RigSpec, dt_s: float, initial_height: float = 0.0, initial_force: float = 0.0,
-                 force_offset_N: float = 0.0, noise_std_N: float = 0.0, noise_seed: int = 0):
+                 force_offset_N: float = 0.0, noise_std_N: float = 0.0, noise_seed: int = 0, linear: bool = False):
         self.spec, self.dt = spec, dt_s
         hp, fp = spec.height, spec.force
         self._zdelay = deque([initial_height] * hp.delay_steps)
         self._fdelay = deque([initial_force] * fp.delay_steps)
-        self._drive = _Drive(spec, dt_s, initial_height)
+        self._drive = _Drive(spec, dt_s, initial_height, limited=not linear)
         b, a = force_filter_coefficients(fp, dt_s)
         self._filter = DiscreteFilter(b, a, initial_force)
-        self.offset, self.noise = force_offset_N, noise_std_N
+        self.offset, self.noise = (0.0, 0.0) if linear else (force_offset_N, noise_std_N)
         self._rng = np.random.default_rng(noise_seed)
+
+    def state(self) -> list:
+        """Every value the chain remembers between steps: delay lines, drive, filter (its clocks aside)."""
+        d = self._drive
+        return [*self._zdelay, *self._fdelay, *(getattr(d, k) for k in d.state_names()), *self._filter.state]
+
+    def set_state(self, values) -> None:
+        """Write the values `state()` lists, in its order."""
+        values = list(values)
+        if len(values) != len(self.state()):
+            raise ValueError(f"the rig chain has {len(self.state())} state values, got {len(values)}")
+        nz, nf = len(self._zdelay), len(self._fdelay)
+        self._zdelay = deque(values[:nz])
+        self._fdelay = deque(values[nz:nz + nf])
+        names = self._drive.state_names()
+        for k, v in zip(names, values[nz + nf:nz + nf + len(names)], strict=True):
+            setattr(self._drive, k, v)
+        self._filter.state = values[nz + nf + len(names):]
 
     @staticmethod
     def _through(line: deque, x: float) -> float:
@@ -243,7 +281,7 @@ def record_spans(spec: RigSpec | None, dt_s: float, samples_per_span: int, minim
     unlimited), doubled until there are at least `minimum` (a rig of unknown clocks: `minimum`)."""
     spans = 1
     if spec is not None:
-        pattern = _pattern_steps(spec, dt_s)
+        pattern = pattern_steps(spec, dt_s)
         spans = max(1, pattern // math.gcd(pattern, samples_per_span))
     while spans < minimum:
         spans *= 2
@@ -292,7 +330,7 @@ def frequency_response(spec: RigSpec, dt_s: float, samples_per_span: int, n_harm
             harmonic_gains(f_in[rec], out[rec, 1], spans, n_harmonics))
 
 
-def _pattern_steps(spec: RigSpec, dt_s: float) -> int:
+def pattern_steps(spec: RigSpec, dt_s: float) -> int:
     """Steps after which the decimation and the sub-reference clock repeat."""
     p = max(1, spec.height.decimation)
     tau = spec.height.sub_step_s
@@ -308,7 +346,7 @@ def _pattern_steps(spec: RigSpec, dt_s: float) -> int:
 def pattern_spans(spec: RigSpec, dt_s: float, samples_per_span: int, limit: int = 8) -> int:
     """Spans after which the rig's clocks are back at the same phase within the span (at most `limit`;
     beyond it the pattern is treated as unrelated to the span and the steady state as span-periodic)."""
-    p = _pattern_steps(spec, dt_s)
+    p = pattern_steps(spec, dt_s)
     spans = p // math.gcd(p, samples_per_span)
     return spans if spans <= limit else 1
 

@@ -20,6 +20,8 @@ from pantohil.models.pantograph.linear import LinearPantograph, linear_pantograp
 from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.stability.maps import (circulant_dense, circulant_range_basis, range_basis, reduced_span_map,
     span_map, step_matrix)
+from pantohil.models.stability.rig_map import (LOOP_CONNECTIONS, RigLoop, rig_span_maps, rig_span_parts, span_rate,
+    step_rate)
 from pantohil.models.stability.step_roots import step_loop, step_spectral_radius
 
 # relaxations tried before the local refinement (the radius is not unimodal in mu everywhere)
@@ -68,6 +70,47 @@ class StabilityProblem:
                 rho = step_matrix(self.kernel, self.pantograph, self.settings(mu), self.latency_steps).spectral_radius
             return rho
         return span_map(self.I_cc, self.pantograph, self.settings(mu), self.latency_steps).spectral_radius
+
+
+@dataclass
+class RigLoopProblem:
+    """One point of a map for a case with a rig file: the loop of models/hil/rig_loop.py with the rig's chain
+    in place of the pure delay (models/stability/rig_map.py); the same `spectral_radius(mu)` as
+    StabilityProblem (the rate per span over the rig's pattern)."""
+
+    update: str
+    loop: RigLoop
+    n_harmonics: int
+    kernel: np.ndarray | None = None  # circulant I_cc (ASM): first column
+    I_cc: np.ndarray | None = None  # dense I_cc (PFEM)
+
+    def __post_init__(self):
+        if self.update not in ("step", "span"):
+            raise ValueError(f"update must be 'step' or 'span', got {self.update!r}")
+        if self.update == "step" and self.kernel is None:
+            raise ValueError("step-by-step updating with the rig's chain needs a circulant (ASM) operator")
+        if self.update == "span":  # the plant's part of the span maps does not depend on mu: once
+            I_cc = circulant_dense(self.kernel) if self.I_cc is None else self.I_cc
+            self._parts = rig_span_parts(self.loop, I_cc, self.n_harmonics)
+
+    def spectral_radius(self, mu: float) -> float:
+        """The rate per span of Paper D eq. (13) with the rig's chain, at relaxation mu."""
+        if self.update == "span":
+            return span_rate(rig_span_maps(self._parts, mu))
+        return step_rate(self.loop, self.kernel, mu)
+
+
+def rig_problem_for(case, update: str, pantograph: PantographParameters, n_harmonics: int,
+                    delay_steps: int | None = None, kernel: np.ndarray | None = None,
+                    I_cc: np.ndarray | None = None) -> RigLoopProblem:
+    """The stability problem of a case with a rig file at N_h harmonics: its chain in the loop, its response
+    compensated at those harmonics if the case says so, and D = the case's advance unless given."""
+    gz = gf = None
+    if case.compensates_rig_response:
+        gz, gf = case.rig_response(n_harmonics)
+    d = case.delay_steps(LOOP_CONNECTIONS) if delay_steps is None else int(delay_steps)
+    loop = RigLoop(linear_pantograph(pantograph, case.dt_s), case.rig_spec, case.dt_s, d, gz, gf, case.hold_steps)
+    return RigLoopProblem(update, loop, n_harmonics, kernel=kernel, I_cc=I_cc)
 
 
 def best_relaxation(problem: StabilityProblem, grid=RELAXATION_GRID, xatol: float = 2e-3) -> tuple[float, float]:
