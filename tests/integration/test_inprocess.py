@@ -127,3 +127,24 @@ def test_the_block_writer_gives_the_bytes_of_one_message_at_a_time(tmp_path, mon
     rng = np.random.default_rng(0)
     monkeypatch.setattr(recorder, "add_messages", lambda *args: False)  # mcap's Writer.add_message per message
     assert fast == write(tmp_path / "one_by_one.mcap")
+
+
+class StopAfterSpan(RunObserver):
+    """Asks for a stop (as SIGINT would) once a given span has closed."""
+
+    def __init__(self, stop, span: int):
+        self.stop, self.span = stop, span
+
+    def on_span(self, run, span: int, record: dict) -> None:
+        if span == self.span:
+            self.stop.request()
+
+
+def test_a_stop_ends_an_in_process_run_at_a_step_boundary(tmp_path):
+    from pantohil.orchestrator.stopping import StopRequest
+
+    stop = StopRequest()
+    summary = run_case(load_case(None, []), tmp_path / "run", progress=False, engine="inprocess", stop=stop,
+                       observers=(StopAfterSpan(stop, 1),))
+    assert summary.status == "interrupted" and summary.spans == 2 and summary.exit_code == 130
+    assert (tmp_path / "run" / STEADY_SPAN).exists()
