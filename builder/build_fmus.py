@@ -70,7 +70,14 @@ def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
     (pkg / "fmus").mkdir()
     for f in SUPPORT_MODULES:
         shutil.copy2(FMUS_DIR / f, pkg / "fmus" / f)
-    files = [pkg]
+    return [pkg, *stage_case_data(name, params, case, stage)]
+
+
+def stage_case_data(name: str, params: dict, case: Case, stage: Path, link: bool = False) -> list[Path]:
+    """Write the case data an FMU reads from resources/ into `stage`: its parameter values, the profile,
+    the rig file, the rig's response and the PFEM operators. The in-process engine initialises the same
+    FMU classes from such a folder; `link` puts the (large) operator file in as a symbolic link."""
+    files = []
     (stage / fmu_support.PARAMETERS_FILE).write_text(json.dumps(params, indent=1, sort_keys=True))
     files.append(stage / fmu_support.PARAMETERS_FILE)
     (stage / fmu_support.REQUIREMENTS_FILE).write_text("\n".join(fmu_support.REQUIREMENTS) + "\n")
@@ -89,7 +96,10 @@ def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
             files.append(stage / "rig_response.csv")
         if case.model == "pfem":
             op = case_operators(case)
-            shutil.copy2(op.path, stage / "operators.npz")
+            if link:
+                (stage / "operators.npz").symlink_to(Path(op.path).resolve())
+            else:
+                shutil.copy2(op.path, stage / "operators.npz")
             files.append(stage / "operators.npz")
     return files
 

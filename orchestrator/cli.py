@@ -73,6 +73,9 @@ def _add_run_command(sub) -> None:
     run.add_argument("--overwrite", action="store_true", help="replace the contents of --out if it is not empty")
     run.add_argument("--master", choices=("fmpy", "libcosim"), default="fmpy",
                      help="co-simulation master: pantohil's fmpy master or OSP's libcosim (default fmpy)")
+    run.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu",
+                     help="fmu: the FMUs in the master (default); inprocess: the same models stepped in this "
+                          "process without the FMI boundary, same result, much faster (virtual HIL only)")
     run.add_argument("--hardware", metavar="HOST:PORT",
                      help="run against a rig controller (or `pantohil rig-emulator`) through the adapter FMU")
     run.add_argument("--paced-by", choices=("model", "rig"),
@@ -253,6 +256,9 @@ def _add_sweep_command(sub) -> None:
     sweep.add_argument(
         "--workers", type=number(1, MAX_WORKERS, integer=True), help="LocalCluster worker processes (default: 2)"
     )
+    sweep.add_argument("--engine", choices=("inprocess", "fmu"),
+                       help="how each point runs: inprocess (the default, or the sweep file's sweep.engine) or "
+                            "fmu (the FMUs in the fmpy master); the results are the same")
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -414,7 +420,7 @@ def _cmd_run(args, stop) -> int:
             result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system,
                               hardware=hardware, realtime=args.realtime, rt_priority=args.rt_priority,
                               live=live, live_wait=args.live_wait, checkpoint_info=checkpoint_info, resume=resume,
-                              overwrite=args.overwrite, stop=stop)
+                              overwrite=args.overwrite, stop=stop, engine=args.engine)
         except RunFolderError as exc:
             raise CaseError(f"--out: {exc}") from None
         except RunInterrupted as exc:
@@ -663,7 +669,8 @@ def _cmd_sweep(args) -> int:
     from pantohil.orchestrator.sweep import run_sweep
 
     try:
-        s = run_sweep(args.file, args.out, args.scheduler, args.workers, progress=not args.quiet)
+        s = run_sweep(args.file, args.out, args.scheduler, args.workers, progress=not args.quiet,
+                      engine=args.engine)
     except KeyboardInterrupt:
         print(f"interrupted: the points done so far are in {args.out / 'results.csv'}; run the same command again "
               "to run the others", file=sys.stderr)

@@ -34,6 +34,7 @@ from tqdm import tqdm
 from . import checkpoint
 from .case_reference import case_dropper_positions
 from .case_reference import closed_form_reference as closed_form_reference  # re-exported (tests, callers)
+from .inprocess import ENGINES, InProcessMaster
 from .master import JacobiMaster
 from .pacing import Pacer, set_realtime_priority
 from .recorder import McapRecorder
@@ -108,6 +109,7 @@ class RunOptions:
     live_wait: bool = False
     checkpoint_info: dict | None = None
     resume: dict | None = None
+    engine: str = "fmu"  # "inprocess": the models stepped in this process (orchestrator/inprocess.py)
 
 
 @dataclass
@@ -191,6 +193,7 @@ def run_topology(case: Case, options: RunOptions) -> Topology:
     """The loop of the run, with the dropper corrections logged beside the catenary for a slackening PFEM."""
     if options.master_kind not in MASTERS:
         raise CaseError(f"master: must be one of {', '.join(MASTERS)} (got {options.master_kind!r})")
+    _check_engine(options)
     rig_paced = is_rig_paced(case, options)
     if options.hardware is not None and (options.system is not None or
                                          (options.master_kind != "fmpy" and not rig_paced)):
@@ -218,16 +221,18 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
              system: dict | None = None, hardware: tuple[str, int] | None = None,
              realtime: bool = False, rt_priority: int | None = 50, live: tuple[str, int] | None = None,
              live_wait: bool = False, checkpoint_info: dict | None = None, resume: dict | None = None, *,
-             overwrite: bool = False, observers: tuple = (), stop: StopRequest | None = None) -> RunSummary:
+             overwrite: bool = False, observers: tuple = (), stop: StopRequest | None = None,
+             engine: str = "fmu") -> RunSummary:
     """Run a case into `out_dir` (new or empty; `overwrite` replaces it whole) and return its summary.
     `live` (host, port) serves the run's channels to Foxglove while it runs (`live_wait`: from a
     viewer's first subscription on); `observers` are called per step, per span and at the end.
-    `checkpoint_info` (case file, overrides): save the state every span (virtual HIL, fmpy master);
+    `checkpoint_info` (case file, overrides): save the state every span (virtual HIL, fmpy master, FMUs);
     `resume` (checkpoint.load of an interrupted run in out_dir): continue from its last saved span.
+    `engine` "inprocess" steps the same models without the FMUs (virtual HIL only; same result).
 
     Without `stop`, SIGINT and SIGTERM are caught for the duration of the run (main thread only)."""
     options = RunOptions(master_kind, system, hardware, realtime, rt_priority, progress, live, live_wait,
-                         checkpoint_info, resume)
+                         checkpoint_info, resume, engine)
     topology = run_topology(case, options)
     plan = delay_plan(case, topology)  # validates before anything is written
     with (stop_on_signals() if stop is None else nullcontext(stop)) as request:
@@ -250,7 +255,20 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
 
 def _saves_checkpoints(options: RunOptions, topology: Topology) -> bool:
     return (options.checkpoint_info is not None and options.master_kind == "fmpy" and topology.name == VIRTUAL.name
-            and options.system is None)
+            and options.system is None and options.engine == "fmu")
+
+
+def _check_engine(options: RunOptions) -> None:
+    """The in-process engine runs the virtual HIL of a case file, from its start, in place of the fmpy master."""
+    if options.engine not in ENGINES:
+        raise CaseError(f"--engine: must be one of {', '.join(ENGINES)} (got {options.engine!r})")
+    if options.engine == "fmu":
+        return
+    clash = ("--hardware" if options.hardware is not None else "--master libcosim" if options.master_kind != "fmpy"
+             else "an SSP file" if options.system is not None else "--resume" if options.resume is not None else None)
+    if clash is not None:
+        raise CaseError(f"--engine inprocess: not with {clash} (the in-process engine runs the virtual HIL of a "
+                        "case from its start; use --engine fmu)")
 
 
 def _pfem_operators(case: Case, options: RunOptions, stop: StopRequest) -> dict | None:
@@ -269,7 +287,10 @@ def prepare(prepared: PreparedRun) -> None:
     """Stage 1: build the case's FMUs into the run folder (or take the SSP system's)."""
     t_build = time.perf_counter()
     options, plan = prepared.options, prepared.plan
-    if options.system is None:
+    if options.engine == "inprocess":  # no FMUs: the master creates the models from the case
+        prepared.connections = prepared.topology.connections
+        prepared.parameters = {"catenary": {"delay_steps": plan["delay_steps"]}}
+    elif options.system is None:
         prepared.fmus = build_case_fmus(prepared.case, prepared.out_dir / "fmus", plan["delay_steps"],
                                         prepared.topology.fmus, options.hardware or ("127.0.0.1", 47800))
         prepared.connections = prepared.topology.connections
@@ -288,7 +309,8 @@ def _recorder(prepared: PreparedRun, groups: dict) -> McapObserver:
     log_name = "run.mcap" if options.resume is None else f"run_from_span_{first_span:04d}.mcap"  # the first log stays
     recorder = McapRecorder(prepared.out_dir / log_name, groups,
                             {"case": case.name, "dt_s": case.dt_s, "samples_per_span": case.samples_per_span,
-                             "master": options.master_kind, "topology": prepared.topology.name,
+                             "master": options.master_kind, "engine": options.engine,
+                             "topology": prepared.topology.name,
                              "realtime": options.realtime})
     return McapObserver(recorder, prepared.topology.groups, case.dt_s)
 
@@ -303,13 +325,15 @@ def start(state: RunState) -> None:
     mcap = _recorder(prepared, state.logged_groups)
     capacity = min(case.values["run"]["max_spans"], RECORDED_SPANS) * case.samples_per_span  # bounded rings
     try:
-        if options.master_kind == "libcosim":
+        if options.engine == "inprocess":
+            state.master = InProcessMaster(case, prepared.connections, prepared.parameters, case.dt_s, capacity)
+        elif options.master_kind == "libcosim":
             from .libcosim_master import LibcosimMaster
 
-            master_class = LibcosimMaster
+            state.master = LibcosimMaster(prepared.fmus, prepared.connections, prepared.parameters, case.dt_s,
+                                          capacity)
         else:
-            master_class = JacobiMaster
-        state.master = master_class(prepared.fmus, prepared.connections, prepared.parameters, case.dt_s, capacity)
+            state.master = JacobiMaster(prepared.fmus, prepared.connections, prepared.parameters, case.dt_s, capacity)
     except BaseException:
         mcap.recorder.close()
         raise
@@ -386,11 +410,22 @@ def _limits(state: RunState):
     return cat.index("force_at_sample"), cat.index("height_command"), *limits, link_col
 
 
+def _diverged(master, span: int, i_f: int, i_z: int, dt: float) -> _Stop:
+    out = master.values["catenary"]
+    return _Stop("diverged", f"diverged at t = {master.k * dt:.3f} s (span {span}): force {out[i_f]:.4g} N, "
+                             f"height {out[i_z]:.4g} m beyond run.force_limit_N / run.height_limit_m")
+
+
 def _steps(state: RunState, span: int) -> str | None:
     """The steps of one span; "interrupted" if a stop was requested before one of them."""
     master, pacer, stop, dt = state.master, state.pacer, state.stop, state.case.dt_s
     i_f, i_z, f_lim, z_lim, link_col = _limits(state)
     step_observers = [o for o in state.observers if o.wants_steps]
+    if pacer is None and not step_observers and hasattr(master, "run_steps"):  # the in-process engine: a span at once
+        outcome = master.run_steps((span + 1) * state.case.samples_per_span - master.k, stop, f_lim, z_lim)
+        if outcome == "diverged":
+            raise _diverged(master, span, i_f, i_z, dt)
+        return outcome
     for _ in range(state.case.samples_per_span):
         if stop.requested:
             return "interrupted"
@@ -402,8 +437,7 @@ def _steps(state: RunState, span: int) -> str | None:
             pacer.done(k)
         out = master.values["catenary"]
         if not (abs(out[i_f]) <= f_lim and abs(out[i_z]) <= z_lim):  # also catches NaN
-            raise _Stop("diverged", f"diverged at t = {master.k * dt:.3f} s (span {span}): force {out[i_f]:.4g} N, "
-                                    f"height {out[i_z]:.4g} m beyond run.force_limit_N / run.height_limit_m")
+            raise _diverged(master, span, i_f, i_z, dt)
         if link_col is not None and master.int_value("adapter", "link_state", k) == LINK_FAULT:
             if k == 0 and not master.int_value("adapter", "session_started", 0):
                 raise _Stop("link_lost", _session_refused(master.int_value("adapter", "rig_refusal", 0),

@@ -81,6 +81,7 @@ class RunSummary:
     link: dict | None = None
     live: dict | None = None
     resumed_from_span: int | None = None
+    engine: str = "fmu"  # "inprocess": stepped without the FMUs (pantohil run --engine)
     contact_force: ForceStatistics | None = None
     reference: dict | None = None
     droppers: dict | None = None

@@ -6,13 +6,15 @@ A sweep file (TOML) names a case, the keys to sweep and, optionally, keys fixed 
     name = "speed_200_300"
     case = "../cases/asm_250.toml"   # relative to the sweep file; omitted: the built-in case
     kind = "run"                     # "run": a virtual HIL run per point; "direct": the closed form (Paper A)
+    engine = "inprocess"             # kind "run": "inprocess" (default, the models without FMUs) or "fmu"
     [set]
     "hil.relaxation" = 0.1
     [grid]
     "run.speed_kmh" = { start = 200.0, stop = 300.0, num = 12 }   # or a list of values
 
-Every combination of the grid values is a point. A point of kind "run" is `pantohil run` in a child
-process of a Dask worker (its own run folder under points/); a point of kind "direct" is the ASM closed
+Every combination of the grid values is a point. A point of kind "run" is `pantohil run --engine ENGINE`
+in a child process of a Dask worker (its own run folder under points/; the engine changes the time a
+point takes, not its result: the sweep's hash leaves it out); a point of kind "direct" is the ASM closed
 form, with the extra key `direct.second_pantograph_m` for a trailing pantograph (Paper A Fig. 17). The
 results table (results.csv and results.parquet) is rewritten after every point; a restart with the same
 sweep and folder skips the points already in it.
@@ -39,6 +41,7 @@ from pantohil.models.input_files import InputFileError, load_toml
 from pantohil.models.storage import atomic_path
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
+from .inprocess import ENGINES
 from .report import write_json_atomic
 from .run_folder import SUMMARY, read_summary
 
@@ -119,10 +122,10 @@ def load_sweep(path: Path) -> dict:
         if not isinstance(raw.get(section, {}), dict):
             _fail(path, f"[{section}] must be a table (got {raw[section]!r})")
     head = raw.get("sweep", {})
-    for key in ("name", "case", "kind", "plot_x", "description"):
+    for key in ("name", "case", "kind", "plot_x", "description", "engine"):
         if key in head and not isinstance(head[key], str):
             _fail(path, f"sweep.{key} must be a string (got {head[key]!r})")
-    bad = set(head) - {"name", "case", "kind", "plot_x", "description"}
+    bad = set(head) - {"name", "case", "kind", "plot_x", "description", "engine"}
     if bad:
         _fail(path, f"unknown key sweep.{sorted(bad)[0]}")
     kind = head.get("kind", "run")
@@ -160,7 +163,14 @@ def load_sweep(path: Path) -> dict:
     definition = {"name": head.get("name", path.stem), "kind": kind, "case": str(case) if case else None,
                   "set": fixed, "grid": values, "plot_x": plot_x}
     definition["hash"] = hashlib.sha1(json.dumps(definition, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    definition["engine"] = _engine(path, head.get("engine", "inprocess"))  # not hashed: the same results
     return {"definition": definition, "points": points}
+
+
+def _engine(path: Path, engine: str) -> str:
+    if engine not in ENGINES:
+        _fail(path, f"sweep.engine must be one of {', '.join(ENGINES)} (got {engine!r})")
+    return engine
 
 
 def sweep_point(task: dict) -> dict:
@@ -186,7 +196,7 @@ def sweep_point(task: dict) -> dict:
         cmd += [task["case"]] if task["case"] else []
         for o in task["overrides"]:
             cmd += ["--set", o]
-        cmd += ["--out", str(folder), "--quiet"]
+        cmd += ["--out", str(folder), "--quiet", "--engine", task.get("engine", "inprocess")]
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode not in (0, 1) or not (folder / SUMMARY).exists():
             lines = (proc.stderr or proc.stdout).strip().splitlines()
@@ -241,10 +251,13 @@ def _status_counts(rows: list[dict]) -> dict:
 
 
 def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers: int | None = None,
-              progress: bool = True, log=print) -> dict:
-    """`pantohil sweep`: run the points of a sweep file on Dask, skip those done, write results."""
+              progress: bool = True, log=print, engine: str | None = None) -> dict:
+    """`pantohil sweep`: run the points of a sweep file on Dask, skip those done, write results. `engine`
+    ("inprocess" or "fmu") replaces the sweep file's sweep.engine."""
     sweep = load_sweep(sweep_path)
     definition, points = sweep["definition"], sweep["points"]
+    if engine is not None:
+        definition["engine"] = _engine(Path(sweep_path), engine)
     out = Path(out)
     marker = out / "sweep.json"
     _check_same_sweep(marker, out, definition)
@@ -260,7 +273,8 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
         n_workers = worker_count(client)
         log(f"{definition['name']}: {len(points)} points, {len(done)} already done, {len(todo)} to run "
             f"on {n_workers} workers")
-        tasks = [{"kind": definition["kind"], "case": definition["case"], "overrides": p["overrides"],
+        tasks = [{"kind": definition["kind"], "engine": definition["engine"], "case": definition["case"],
+                  "overrides": p["overrides"],
                   "extra": p["extra"], "folder": str((out / "points" / p["id"]).resolve())} for p in todo]
         by_task = {id(t): p for t, p in zip(tasks, todo, strict=False)}
         t0 = time.perf_counter()
@@ -287,8 +301,8 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
         _write_results(out, rows, columns)
     figures = plot_sweep(out, rows, definition) if rows else []
     statuses = _status_counts(rows)
-    summary = {"name": definition["name"], "kind": definition["kind"], "points": len(points),
-               "skipped_done": len(done), "ran": len(rows) - len(done), "statuses": statuses,
+    summary = {"name": definition["name"], "kind": definition["kind"], "engine": definition["engine"],
+               "points": len(points), "skipped_done": len(done), "ran": len(rows) - len(done), "statuses": statuses,
                "workers": n_workers, "scheduler": scheduler or "LocalCluster", "wall_s": wall,
                "interrupted": interrupted, "figures": figures}
     write_json_atomic(out / "summary.json", summary)

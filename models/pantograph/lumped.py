@@ -165,14 +165,14 @@ class ChainPantograph:
     def step(self, z_next: float) -> float:
         """One HHT step with unilateral contact: free unless the head would penetrate the wire."""
         x = self._x
-        n = self.params.n
+        n = len(self.u)
         x[:n], x[n:2 * n], x[2 * n:3 * n] = self.u, self.v, self.acc
         x[-3], x[-2] = z_next, self.force
-        new = self._step_free @ x
-        gap = self.head_ref + new[0] - z_next
+        new = self._step_free.dot(x)  # the same product as `@` (BLAS gemv), with less overhead per call
+        gap = self.head_ref + new.item(0) - z_next
         if gap > 0.0:
-            new = self._step_act @ x
-            gap = self.head_ref + new[0] - z_next
+            new = self._step_act.dot(x)
+            gap = self.head_ref + new.item(0) - z_next
         self.u, self.v, self.acc = new[:n], new[n:2 * n], new[2 * n:]
         self.z = z_next
         self.force = self.kc * gap if gap > 0.0 else 0.0

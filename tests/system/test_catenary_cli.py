@@ -54,7 +54,8 @@ def test_bad_catenary_files_give_one_line_and_exit_2(tmp_path, edit, key):
 @pytest.mark.slow
 def test_a_case_with_the_form_found_profile_converges(tmp_path):
     out = tmp_path / "fe_case"
-    proc = pantohil("run", str(CASES_DIR / "asm_paper_a_fe.toml"), "--out", str(out), "--quiet")
+    proc = pantohil("run", str(CASES_DIR / "asm_paper_a_fe.toml"), "--out", str(out), "--quiet",
+                    "--engine", "inprocess")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     summary, _ = load_run(out)
     assert summary["converged"] and summary["reference"]["rms_error_rel_std"] < 5e-3

@@ -46,7 +46,7 @@ def test_mcap_log_has_every_signal_group(default_run):
 @pytest.mark.slow
 def test_span_by_span_at_10_hz(tmp_path):
     out = tmp_path / "span"
-    proc = pantohil("run", "--out", str(out), "--quiet", "--set", 'hil.update="span"',
+    proc = pantohil("run", "--out", str(out), "--quiet", "--set", 'hil.update="span"', "--engine", "inprocess",
                     "--set", "hil.max_frequency_hz=10", "--set", "run.max_spans=400")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     summary, _ = load_run(out)
@@ -59,12 +59,14 @@ def test_rig_delay_compensated_equals_no_delay_and_uncompensated_differs(default
     # the default case has a 4-step rig delay, compensated
     with_delay, f_delay = load_run(default_run)
     no_delay_dir = tmp_path / "nodelay"
-    assert pantohil("run", "--out", str(no_delay_dir), "--quiet", "--set", "rig.delay_steps=0").returncode == 0
+    assert pantohil("run", "--out", str(no_delay_dir), "--quiet", "--set", "rig.delay_steps=0",
+                    "--engine", "inprocess").returncode == 0
     no_delay, f_none = load_run(no_delay_dir)
     std = no_delay["contact_force"]["std_N"]
     assert rel_rms(f_delay[:, 3], f_none[:, 3], std) <= 5e-3
     unc_dir = tmp_path / "uncompensated"
-    proc = pantohil("run", "--out", str(unc_dir), "--quiet", "--set", "hil.delay_compensation=false")
+    proc = pantohil("run", "--out", str(unc_dir), "--quiet", "--set", "hil.delay_compensation=false",
+                    "--engine", "inprocess")
     unc, f_unc = load_run(unc_dir)
     assert unc["hil"]["delay_steps"] == unc["hil"]["loop_latency_steps"]
     if unc["converged"]:

@@ -18,7 +18,8 @@ def test_the_master_keeps_a_bounded_record(tmp_path):
     from pantohil.orchestrator.hil_run import RECORDED_SPANS
 
     out = tmp_path / "long"
-    proc = pantohil("run", "--out", str(out), "--quiet", "--set", f"run.max_spans={RECORDED_SPANS + 8}",
+    proc = pantohil("run", "--out", str(out), "--quiet", "--engine", "inprocess",  # the same rings as the fmpy master's
+                    "--set", f"run.max_spans={RECORDED_SPANS + 8}",
                     "--set", f"run.duration_s={(RECORDED_SPANS + 7.5) * 0.936}")
     assert proc.returncode in (0, 1), proc.stdout + proc.stderr  # converged or not within the fixed length
     summary, span = load_run(out)

@@ -32,7 +32,7 @@ def pfem_runs(tmp_path_factory):
     out = {}
     for name, extra in (("nonlinear", []), ("linear", ["--set", "pfem.droppers=false"])):
         proc = pantohil("run", str(CASES / "pfem_benchmark_250.toml"), "--out", str(base / name), "--quiet", *extra,
-                        timeout=1200)
+                        "--engine", "inprocess", timeout=1200)  # the model under test; the FMU path: test_inprocess.py
         assert proc.returncode == 0, proc.stdout + proc.stderr
         out[name] = base / name
     return out

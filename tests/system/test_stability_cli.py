@@ -1,4 +1,5 @@
-"""`pantohil stability`: maps on Dask, and its predictions against virtual HIL runs of the FMUs."""
+"""`pantohil stability`: maps on Dask, and its predictions against virtual HIL runs of the FMUs' models
+(in process: the same result as the FMU path, tests/integration/test_inprocess.py)."""
 import csv
 import json
 from concurrent.futures import ThreadPoolExecutor
@@ -35,7 +36,7 @@ def _simulate(tmp_path, i, update, fmax, kc, latency, mu):
     proc = pantohil("run", "--set", f'hil.update="{update}"', "--set", f"hil.max_frequency_hz={fmax}",
                     "--set", f"pantograph.contact_stiffness_N_m={kc}", "--set", f"hil.relaxation={mu}",
                     "--set", f"rig.delay_steps={latency - MASTER_LATENCY}", "--set", "run.max_spans=150",
-                    "--out", str(out), "--quiet")
+                    "--out", str(out), "--quiet", "--engine", "inprocess")  # the FMUs' models, same result
     assert proc.returncode in (0, 1), proc.stderr
     return json.loads((out / "summary.json").read_text())
 

@@ -1,0 +1,150 @@
+"""The in-process engine (`pantohil run --engine inprocess`) steps the FMUs' own models in the fmpy
+master's Jacobi order: its converged span, its convergence history and every signal the master records
+are the same to the bit as the FMU path's, and its run folder has the same files and channels."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from conftest import CASES_DIR, load_run, pantohil
+from pantohil.models.case import load_case
+from pantohil.orchestrator.hil_run import RunObserver, run_case
+from pantohil.orchestrator.run_folder import STEADY_SPAN
+
+
+class KeepRecords(RunObserver):
+    """Copies of the master's records (every output and input of the steps still held) at the end."""
+
+    def on_end(self, run) -> None:
+        master = run.master
+        rows = master.rows(max(0, master.k - master.capacity), master.k)
+        self.k = master.k
+        self.outputs = {n: (master.real_outputs[n], master.record[n][rows].copy()) for n in master.names}
+        self.ints = {n: (master.int_outputs[n], a[rows].copy()) for n, a in master.record_int.items()}
+        self.inputs = {n: (master.input_names[n], a[rows].copy()) for n, a in master.record_in.items()}
+        self.values = {n: list(v) for n, v in master.values.items()}
+
+
+def _both(case, tmp_path):
+    out = {}
+    for engine in ("fmu", "inprocess"):
+        keep = KeepRecords()
+        summary = run_case(case, tmp_path / engine, progress=False, engine=engine, observers=(keep,))
+        out[engine] = (summary, keep)
+    return out
+
+
+def _assert_identical(runs, tmp_path):
+    (s_fmu, r_fmu), (s_in, r_in) = runs["fmu"], runs["inprocess"]
+    assert s_in.engine == "inprocess" and s_fmu.engine == "fmu"
+    assert (s_in.status, s_in.spans) == (s_fmu.status, s_fmu.spans)
+    assert s_in.convergence == s_fmu.convergence  # every span's change, mean, std, max, min: exactly
+    _, span_fmu = load_run(tmp_path / "fmu")
+    _, span_in = load_run(tmp_path / "inprocess")
+    assert np.array_equal(span_fmu, span_in)
+    assert (tmp_path / "fmu" / STEADY_SPAN).read_bytes() == (tmp_path / "inprocess" / STEADY_SPAN).read_bytes()
+    assert r_in.k == r_fmu.k and r_in.values == r_fmu.values
+    for kept in ("outputs", "ints", "inputs"):
+        a, b = getattr(r_fmu, kept), getattr(r_in, kept)
+        assert a.keys() == b.keys()
+        for name in a:
+            assert a[name][0] == b[name][0]
+            assert np.array_equal(a[name][1], b[name][1], equal_nan=True), (kept, name)
+
+
+def test_the_default_case_is_the_same_to_the_bit_in_process(tmp_path):
+    case = load_case(None, [])
+    runs = _both(case, tmp_path)
+    _assert_identical(runs, tmp_path)
+    assert runs["inprocess"][0].converged
+    assert runs["inprocess"][0].fmus == []
+
+
+@pytest.mark.slow
+def test_a_pfem_case_with_droppers_is_the_same_to_the_bit_in_process(tmp_path):
+    case = load_case(CASES_DIR / "pfem_benchmark_250.toml", [])
+    runs = _both(case, tmp_path)
+    _assert_identical(runs, tmp_path)
+    assert runs["inprocess"][0].droppers == runs["fmu"][0].droppers
+
+
+def _channels(path) -> dict[str, int]:
+    with open(path, "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    return {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+
+
+def test_the_in_process_run_folder_has_the_fmu_runs_files_and_channels(tmp_path):
+    args = ("--set", "run.max_spans=3", "--set", "run.duration_s=2.5", "--quiet")
+    for engine in ("fmu", "inprocess"):
+        proc = pantohil("run", "--out", str(tmp_path / engine), "--engine", engine, *args)
+        assert proc.returncode in (0, 1), proc.stderr
+    files = {p.name for p in (tmp_path / "inprocess").iterdir()}
+    assert {"summary.json", "run.mcap", STEADY_SPAN, "contact_force.png", "convergence.png"} <= files
+    assert files == {p.name for p in (tmp_path / "fmu").iterdir()} - {"fmus", "state"}
+    assert _channels(tmp_path / "inprocess" / "run.mcap") == _channels(tmp_path / "fmu" / "run.mcap")
+    summary = json.loads((tmp_path / "inprocess" / "summary.json").read_text())
+    assert summary["engine"] == "inprocess" and summary["spans"] == 3
+
+
+@pytest.mark.parametrize("args,clash", [
+    (["--hardware", "127.0.0.1:47999"], "--hardware"),
+    (["--master", "libcosim"], "--master libcosim"),
+])
+def test_the_in_process_engine_refuses_what_it_does_not_run(tmp_path, args, clash):
+    out = tmp_path / "refused"
+    proc = pantohil("run", "--engine", "inprocess", *args, "--out", str(out), "--quiet")
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--engine inprocess" in lines[0] and clash in lines[0], proc.stderr
+    assert not out.exists()
+
+
+def test_the_block_writer_gives_the_bytes_of_one_message_at_a_time(tmp_path, monkeypatch):
+    """run.mcap's per-step blocks go into the chunks in one pack per message (what makes logging keep up
+    with the in-process engine): the file is byte for byte the one mcap's add_message writes."""
+    from pantohil.orchestrator import recorder
+    from pantohil.orchestrator.hil_run import VIRTUAL
+
+    rng = np.random.default_rng(0)
+
+    def write(path):
+        writer = recorder.McapWriter(path, VIRTUAL.groups, {"case": "x"})
+        for i in range(12):
+            t = (np.arange(int(rng.integers(1, 2500))) + 2500 * i) * 1e-3
+            for topic, fields in VIRTUAL.groups.items():
+                columns = rng.standard_normal((len(t), len(fields))) * 10.0 ** float(rng.integers(-3, 3))
+                columns[0, 0] = np.nan if i % 5 == 0 else columns[0, 0]
+                writer.write_block(topic, t, columns)
+            writer.write_event("/convergence", float(t[-1]), {"span": i, "change": float(rng.random())})
+        writer.close()
+        return path.read_bytes()
+
+    fast = write(tmp_path / "fast.mcap")
+    rng = np.random.default_rng(0)
+    monkeypatch.setattr(recorder, "add_messages", lambda *args: False)  # mcap's Writer.add_message per message
+    assert fast == write(tmp_path / "one_by_one.mcap")
+
+
+class StopAfterSpan(RunObserver):
+    """Asks for a stop (as SIGINT would) once a given span has closed."""
+
+    def __init__(self, stop, span: int):
+        self.stop, self.span = stop, span
+
+    def on_span(self, run, span: int, record: dict) -> None:
+        if span == self.span:
+            self.stop.request()
+
+
+def test_a_stop_ends_an_in_process_run_at_a_step_boundary(tmp_path):
+    from pantohil.orchestrator.stopping import StopRequest
+
+    stop = StopRequest()
+    summary = run_case(load_case(None, []), tmp_path / "run", progress=False, engine="inprocess", stop=stop,
+                       observers=(StopAfterSpan(stop, 1),))
+    assert summary.status == "interrupted" and summary.spans == 2 and summary.exit_code == 130
+    assert (tmp_path / "run" / STEADY_SPAN).exists()
