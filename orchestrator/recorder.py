@@ -9,16 +9,12 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import fcntl
-import itertools
 import multiprocessing as mp
 import os
 import signal
-import struct
 from pathlib import Path
 
 import numpy as np
-from mcap.opcode import Opcode
-from mcap.records import MessageIndex
 from mcap.writer import Writer
 
 from .channels import EVENT_SCHEMAS, RowEncoder, encode_event, event_schema, group_schema, schema_name
@@ -26,65 +22,6 @@ from .pacing import background_priority
 
 
 CHUNK_BYTES = 1 << 16  # small chunks: a file cut short loses at most one; `pantohil watch` reads complete chunks
-
-
-_MESSAGE = struct.Struct("<BQHIQQ")  # opcode 0x05, record length, channel, sequence, log time, publish time
-MESSAGE_HEAD = 31  # bytes of a message record before its data
-
-
-class _PackedMessageIndex(MessageIndex):
-    """A chunk's message index written in one pack (the same bytes as MessageIndex.write)."""
-
-    def write(self, stream) -> None:
-        """The MESSAGE_INDEX record: channel, byte length, then (log time, offset) pairs."""
-        stream.start_record(Opcode.MESSAGE_INDEX)
-        stream.write(struct.pack("<HI", self.channel_id, len(self.records) * 16))
-        stream.write(struct.pack(f"<{2 * len(self.records)}Q", *itertools.chain.from_iterable(self.records)))
-        stream.finish_record()
-
-
-def _pack_messages(builder, channel: int, times: list[int], datas: list[bytes], first: int, limit: int) -> int:
-    """Append messages first.. to the chunk builder until its chunk exceeds `limit` bytes; returns the next."""
-    buffer, pack = builder.record_writer._buffer, _MESSAGE.pack
-    size = buffer.tell()
-    index = builder.message_indices.setdefault(channel, _PackedMessageIndex(channel_id=channel, records=[])).records
-    parts, j = [], first
-    while j < len(datas) and size <= limit:
-        data, ns = datas[j], times[j]
-        index.append((ns, size))
-        parts += (pack(5, 22 + len(data), channel, 0, ns, ns), data)
-        size += MESSAGE_HEAD + len(data)
-        j += 1
-    buffer.write(b"".join(parts))
-    span = times[first:j]
-    builder.message_start_time = min(span) if builder.num_messages == 0 else min(builder.message_start_time, *span)
-    builder.message_end_time = max(builder.message_end_time, *span)
-    builder.num_messages += j - first
-    return j
-
-
-def add_messages(writer: Writer, channel: int, times: list[int], datas: list[bytes]) -> bool:
-    """Messages of one channel into the writer's chunks exactly as `Writer.add_message` one by one puts
-    them (the same bytes: statistics, message indexes, a chunk closed once it exceeds the chunk size),
-    with one struct.pack per message instead of a dozen calls. False, and nothing written, if this
-    mcap Writer (1.x) lacks the internals used."""
-    try:
-        stats, builder = writer._Writer__statistics, writer._Writer__chunk_builder
-        limit, finalize = writer._Writer__chunk_size, writer._Writer__finalize_chunk
-    except AttributeError:
-        return False
-    if builder is None or not datas:
-        return builder is not None
-    stats.message_start_time = min(times) if stats.message_count == 0 else min(stats.message_start_time, *times)
-    stats.message_end_time = max(stats.message_end_time, *times)
-    stats.channel_message_counts[channel] += len(datas)
-    stats.message_count += len(datas)
-    j = 0
-    while j < len(datas):
-        j = _pack_messages(builder, channel, times, datas, j, limit)
-        if builder.count > limit:
-            finalize()
-    return True
 
 
 class McapWriter:
@@ -109,12 +46,11 @@ class McapWriter:
 
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
         """Write rows (t[i], columns[i, :]) as messages of one channel."""
-        channel = self._channels[topic]
+        channel, add = self._channels[topic], self._writer.add_message
         encoded = self._encoders[topic].encode(t, columns)
-        times = [int(round(ti * 1e9)) for ti in np.asarray(t, dtype=float).tolist()]
-        if not add_messages(self._writer, channel, times, encoded):
-            for ns, data in zip(times, encoded, strict=True):
-                self._writer.add_message(channel, ns, data, ns)
+        for ti, data in zip(np.asarray(t, dtype=float).tolist(), encoded, strict=False):
+            ns = int(round(ti * 1e9))
+            add(channel, ns, data, ns)
         self.messages += len(t)
 
     def _event_channel(self, topic: str) -> int:

@@ -103,32 +103,6 @@ def test_the_in_process_engine_refuses_what_it_does_not_run(tmp_path, args, clas
     assert not out.exists()
 
 
-def test_the_block_writer_gives_the_bytes_of_one_message_at_a_time(tmp_path, monkeypatch):
-    """run.mcap's per-step blocks go into the chunks in one pack per message (what makes logging keep up
-    with the in-process engine): the file is byte for byte the one mcap's add_message writes."""
-    from pantohil.orchestrator import recorder
-    from pantohil.orchestrator.hil_run import VIRTUAL
-
-    rng = np.random.default_rng(0)
-
-    def write(path):
-        writer = recorder.McapWriter(path, VIRTUAL.groups, {"case": "x"})
-        for i in range(12):
-            t = (np.arange(int(rng.integers(1, 2500))) + 2500 * i) * 1e-3
-            for topic, fields in VIRTUAL.groups.items():
-                columns = rng.standard_normal((len(t), len(fields))) * 10.0 ** float(rng.integers(-3, 3))
-                columns[0, 0] = np.nan if i % 5 == 0 else columns[0, 0]
-                writer.write_block(topic, t, columns)
-            writer.write_event("/convergence", float(t[-1]), {"span": i, "change": float(rng.random())})
-        writer.close()
-        return path.read_bytes()
-
-    fast = write(tmp_path / "fast.mcap")
-    rng = np.random.default_rng(0)
-    monkeypatch.setattr(recorder, "add_messages", lambda *args: False)  # mcap's Writer.add_message per message
-    assert fast == write(tmp_path / "one_by_one.mcap")
-
-
 class StopAfterSpan(RunObserver):
     """Asks for a stop (as SIGINT would) once a given span has closed."""
 
