@@ -28,6 +28,19 @@ def load_run(folder: Path) -> tuple[dict, np.ndarray]:
     return read_summary(folder), read_table(folder, STEADY_SPAN)
 
 
+def closed_form_error_25hz(case, force: np.ndarray) -> float:
+    """RMS difference of a converged span from the rig-free closed form (Paper A eqs. 38-41), both low-passed
+    at 25 Hz (Paper B sec. 5.1), over the closed form's std."""
+    from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, single_pantograph
+    from pantohil.models.metrics import lowpass_periodic
+
+    ss = single_pantograph(case.catenary, case.pantograph, case.speed_m_s, case.span_m,
+                           one_sided_harmonics(case.z0_samples()), case.pantograph.uplift_force_N, case.n_harmonics)
+    ref = ss.force_series(case.samples_per_span)
+    f25, r25 = lowpass_periodic(force, case.dt_s, 25.0), lowpass_periodic(ref, case.dt_s, 25.0)
+    return float(np.sqrt(np.mean(((f25 - f25.mean()) - (r25 - r25.mean())) ** 2)) / np.std(r25))
+
+
 @pytest.fixture(scope="session", autouse=True)
 def isolated_cache(tmp_path_factory):
     """Build FMUs into a cache of the test session's own, so tests also exercise a cold cache."""

@@ -4,10 +4,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import closed_form_error_25hz
 
 from pantohil.models.case import CaseError, load_case
-from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, single_pantograph
-from pantohil.models.metrics import lowpass_periodic
 from pantohil.models.rig.drive_chain import (RigChain, analytic_response, frequency_response, group_delay_s,
                                        latency_steps, pattern_spans)
 from pantohil.models.rig.compensation import HarmonicCompensation
@@ -135,13 +134,6 @@ def test_case_rig_file_errors(tmp_path):
         load_case(CASES / "paper_b_mass_300.toml", ["hil.rig_compensation=\"exact\""])
 
 
-def _closed_form_error_25hz(case, force):
-    ss = single_pantograph(case.catenary, case.pantograph, case.speed_m_s, case.span_m,
-                           one_sided_harmonics(case.z0_samples()), case.pantograph.uplift_force_N, case.n_harmonics)
-    ref = ss.force_series(case.samples_per_span)
-    f25, r25 = lowpass_periodic(force, case.dt_s, 25.0), lowpass_periodic(ref, case.dt_s, 25.0)
-    return float(np.sqrt(np.mean(((f25 - f25.mean()) - (r25 - r25.mean())) ** 2)) / np.std(r25))
-
 
 @pytest.mark.slow
 def test_paper_b_mass_converges_to_the_closed_form_through_the_rig():
@@ -151,11 +143,11 @@ def test_paper_b_mass_converges_to_the_closed_form_through_the_rig():
     case = load_case(CASES / "paper_b_mass_300.toml")
     result = run_loop(case)
     assert result.status == "converged"
-    assert _closed_form_error_25hz(case, result.force_N) < 0.01
+    assert closed_form_error_25hz(case, result.force_N) < 0.01
     delay_only = load_case(CASES / "paper_b_mass_300.toml", ["hil.rig_compensation=\"delay\""])
     result = run_loop(delay_only)
     assert result.status == "converged"
-    assert _closed_form_error_25hz(delay_only, result.force_N) > 0.03
+    assert closed_form_error_25hz(delay_only, result.force_N) > 0.03
 
 
 # --- identification with a rigid mass (pantohil rig-identify, issue 16 acceptance 3) ---

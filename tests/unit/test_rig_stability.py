@@ -5,13 +5,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import closed_form_error_25hz
 
 from pantohil.models.case import load_case
-from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, single_pantograph
 from pantohil.models.catenary.receptance import asm_operator
 from pantohil.models.hil.loop import HilSettings
 from pantohil.models.hil.rig_loop import run_loop
-from pantohil.models.metrics import lowpass_periodic
 from pantohil.models.pantograph.linear import linear_pantograph
 from pantohil.models.rig.drive_chain import HeightPath, RigChain, RigSpec
 from pantohil.models.rig.rig_file import load_rig_file
@@ -131,14 +130,6 @@ def test_the_rig_map_is_in_pantohil_stability(tmp_path):
     assert row["spectral_radius"] > 2.0
 
 
-def _closed_form_error_25hz(case, force) -> float:
-    """RMS difference to the rig-free closed form (Paper A eqs. 38-41) after a 25 Hz low-pass, over its std."""
-    ss = single_pantograph(case.catenary, case.pantograph, case.speed_m_s, case.span_m,
-                           one_sided_harmonics(case.z0_samples()), case.pantograph.uplift_force_N, case.n_harmonics)
-    ref = ss.force_series(case.samples_per_span)
-    f25, r25 = lowpass_periodic(force, case.dt_s, 25.0), lowpass_periodic(ref, case.dt_s, 25.0)
-    return float(np.sqrt(np.mean(((f25 - f25.mean()) - (r25 - r25.mean())) ** 2)) / np.std(r25))
-
 
 @pytest.mark.slow
 @pytest.mark.parametrize("speed", [300, 250, 200])
@@ -149,7 +140,7 @@ def test_the_three_mass_cases_converge_through_paper_b_s_rig(speed):
     case = load_case(CASES / f"paper_b_pantograph_{speed}.toml")
     result = run_loop(case)
     assert result.status == "converged", result.history[-1]
-    assert _closed_form_error_25hz(case, result.force_N) < 0.03
+    assert closed_form_error_25hz(case, result.force_N) < 0.03
 
 
 def test_the_extra_delay_only_delays_the_commands():
