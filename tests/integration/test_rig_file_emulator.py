@@ -85,7 +85,8 @@ def test_the_emulator_runs_a_rig_file_as_the_in_process_loop(tmp_path, name, rig
     against the span: the link's loop is 3 connections, the virtual one's 4, so the emulated rig runs one
     step ahead. With the in-process rig started one step earlier (run_loop's rig_lead_steps=1) the spans
     agree within 0.5 % (Paper D: 6e-4 %, unfiltered too). Paper D's in-band span itself depends on that
-    phase (its linear chain as well, so not the drive's limits): paper_d_mass_300 as the in-process loop
+    phase (its linear chain as well, so not the drive's limits): the PFEM operator is not circulant and
+    maps the staircase's force above the band into heights in it. paper_d_mass_300 as the in-process loop
     starts is 1.05 % from the hardware run, and the 5 phases of its 10 ms control loop spread up to 1.74 %;
     that comparison is bounded per case (LOOP_CASES), at 1.5 % for it."""
     case_file = CASES_DIR / f"{name}.toml"
