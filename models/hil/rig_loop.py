@@ -60,10 +60,12 @@ def case_rig(case: Case, dt_s: float | None = None, spec: RigSpec | None = None)
     return Rig(case.rig, dt)
 
 
-def run_loop(case: Case, force_limit_N: float | None = None, operators=None) -> LoopResult:
+def run_loop(case: Case, force_limit_N: float | None = None, operators=None, rig_lead_steps: int = 0) -> LoopResult:
     """Run the case's loop until the span-to-span change is below run.convergence_tol (after the ramp),
     the force leaves run.force_limit_N or its change stays above run.divergence_change (diverged, as the FMU
-    master decides), or run.max_spans (a PFEM case on its `operators`)."""
+    master decides), or run.max_spans (a PFEM case on its `operators`). `rig_lead_steps`: the rig started
+    that many steps before the loop, at rest (the phase of its clocks against the span: through the adapter
+    and `pantohil rig-emulator` the loop has one connection fewer and the rig runs 1 step ahead)."""
     run = case.values["run"]
     n = case.samples_per_span
     hil = case_iteration(case, case.delay_steps(LOOP_CONNECTIONS), operators)
@@ -72,6 +74,8 @@ def run_loop(case: Case, force_limit_N: float | None = None, operators=None) -> 
     monitor = ConvergenceMonitor(n, case.rig_period_spans())
     limit = force_limit_N or run["force_limit_N"]
     cmd, act, meas, f = 0.0, 0.0, 0.0, pan.settle(0.0)
+    for _ in range(rig_lead_steps):
+        rig.step(0.0, f)
     status, span = "span_limit", 0
     used = np.zeros(n)
     for span in range(run["max_spans"]):

@@ -35,38 +35,78 @@ def _figures(err: dict) -> str:
                      for p, e in err.items())
 
 
-@pytest.mark.network
-@pytest.mark.slow
-def test_the_emulator_runs_a_rig_file_as_the_in_process_loop(tmp_path):
-    """Issue 17 / issue 16 acceptance 5: paper_b_mass_300 against `rig-emulator --rig paper_b.toml` in
-    lockstep (as fast as possible) converges to the span of the in-process virtual loop through the same
-    chain, compensated the same way (the rig's response at the kept harmonics), within 0.5 % RMS of the std
-    in the kept band (25 Hz; measured 0.023 %). Above it the span holds the drive's staircase (N_com = 8
-    and its sub-steps), which the iteration does not control: it alternates from span to span (the
-    2-span steady state: 7.3 % between consecutive spans) and follows the phase of the drive's clock
-    against the span, one step apart here (the link's loop is 3 steps, the virtual one's 4); with the
-    in-process rig started one step earlier the whole spans agree to 0.02 % (measured, not asserted)."""
-    emu = Emulator(tmp_path, "--rig", str(RIGS / "paper_b.toml"), "--case", str(CASE_B))
+# (case, rig file, limit on the difference to the in-process loop as it starts, its measured figure)
+LOOP_CASES = [
+    ("paper_b_mass_300", "paper_b", 0.005),         # 0.023 %
+    ("paper_b_pantograph_300", "paper_b", 0.005),   # 0.015 %
+    ("paper_b_pantograph_250", "paper_b", 0.005),   # 0.0066 %
+    ("paper_d_mass_300", "paper_d", 0.015),         # 1.05 %: the drive's clock phase, see the docstring
+    ("paper_d_mass_250", "paper_d", 0.005),         # 0.30 %
+]
+
+
+def _in_process(case, rig_lead_steps: int):
+    """run_loop of the case (a PFEM case on the operators its hardware run built into the cache)."""
+    operators = None
+    if case.model == "pfem":
+        from pantohil.builder.operators import case_operators
+        from pantohil.models.catenary.pfem.operator_file import load_operators
+
+        operators = load_operators(case_operators(case, progress=False).path)
+    result = run_loop(case, operators=operators, rig_lead_steps=rig_lead_steps)
+    assert result.status == "converged"
+    return result
+
+
+def _run_against_the_emulator(tmp_path: Path, case_file: Path, rig: str):
+    """`pantohil run CASE --hardware` against `rig-emulator --rig RIG` in lockstep: (summary, span, stats)."""
+    emu = Emulator(tmp_path, "--rig", str(RIGS / f"{rig}.toml"), "--case", str(case_file))
     out = tmp_path / "hardware"
     try:
         # a receive timeout far above any stall: every answer is used, the run is deterministic
-        proc = pantohil("run", str(CASE_B), "--hardware", emu.address, "--out", str(out), "--quiet",
+        proc = pantohil("run", str(case_file), "--hardware", emu.address, "--out", str(out), "--quiet",
                         "--set", "link.receive_timeout_s=1.0")
     finally:
         stats = emu.stop()
     assert proc.returncode == 0, proc.stdout + proc.stderr
     summary, span = load_run(out)
+    return summary, span, stats
+
+
+@pytest.mark.network
+@pytest.mark.slow
+@pytest.mark.parametrize("name,rig,limit", LOOP_CASES)
+def test_the_emulator_runs_a_rig_file_as_the_in_process_loop(tmp_path, name, rig, limit):
+    """Issue 17 / issue 16 acceptance 5: each validation of acceptance 2 against `rig-emulator --rig`
+    its rig file in lockstep (as fast as possible) converges to the span of the in-process virtual loop
+    through the same chain, compensated the same way, within 0.5 % RMS of the std in the kept band (25 Hz;
+    figures in docs/validation.md). Above it the span holds the drive's staircase (N_com = 8 for Paper B,
+    5 for Paper D), which the iteration does not control and which follows the phase of the drive's clock
+    against the span: the link's loop is 3 connections, the virtual one's 4, so the emulated rig runs one
+    step ahead. With the in-process rig started one step earlier (run_loop's rig_lead_steps=1) the spans
+    agree within 0.5 % (Paper D: 6e-4 %, unfiltered too). Paper D's in-band span itself depends on that
+    phase (its linear chain as well, so not the drive's limits): the PFEM operator is not circulant and
+    maps the staircase's force above the band into heights in it. paper_d_mass_300 as the in-process loop
+    starts is 1.05 % from the hardware run, and the 5 phases of its 10 ms control loop spread up to 1.74 %;
+    that comparison is bounded per case (LOOP_CASES), at 1.5 % for it."""
+    case_file = CASES_DIR / f"{name}.toml"
+    summary, span, stats = _run_against_the_emulator(tmp_path, case_file, rig)
     assert summary["converged"] and summary["link"]["lost"] == 0 and summary["link"]["limited"] == 0
-    assert summary["link"]["rig_latency_steps"] == 18  # the chain's latency, reported by the emulator's STATUS
+    # the chain's latency, reported by the emulator's STATUS
+    assert summary["link"]["rig_latency_steps"] == {"paper_b": 18, "paper_d": 10}[rig]
     assert stats["commands"] == summary["link"]["sent"]
-    virtual = run_loop(load_case(CASE_B))
-    assert virtual.status == "converged"
-    f_max, dt = load_case(CASE_B).values["hil"]["max_frequency_hz"], load_case(CASE_B).dt_s
-    diff = rel_rms(lowpass_periodic(span[:, 3], dt, f_max), lowpass_periodic(virtual.force_N, dt, f_max))
-    print(f"\nemulated rig file vs in-process loop: {100 * diff:.3g} % RMS of the std below {f_max:g} Hz, "
-          f"{100 * rel_rms(span[:, 3], virtual.force_N):.3g} % unfiltered ({summary['spans']} and "
-          f"{virtual.spans} spans)")
-    assert diff <= 0.005
+    case = load_case(case_file)
+    f_max, dt = case.values["hil"]["max_frequency_hz"], case.dt_s
+    hardware = lowpass_periodic(span[:, 3], dt, f_max)
+    diffs = {}
+    for lead in (0, 1):
+        virtual = _in_process(case, lead)
+        diffs[lead] = rel_rms(hardware, lowpass_periodic(virtual.force_N, dt, f_max))
+        print(f"\n{name} through the emulated {rig} rig vs the in-process loop, its rig {lead} step(s) ahead: "
+              f"{100 * diffs[lead]:.3g} % RMS of the std below {f_max:g} Hz, "
+              f"{100 * rel_rms(span[:, 3], virtual.force_N):.3g} % unfiltered ({summary['spans']} and "
+              f"{virtual.spans} spans)")
+    assert diffs[1] <= 0.005 and diffs[0] <= limit
 
 
 @pytest.mark.network
