@@ -6,7 +6,8 @@ HIL tests". Heavy: the section takes minutes (60 spans at 1 ms: about 12 min on 
     python tests/benchmarks/pfem_fe_spread.py PFEM_RUN_FOLDER FE_CASE.toml --spans 60 --keep fe.npz
 
 FE_CASE is the PFEM run's case, or for a rigid-mass HIL case a copy with a one-mass chain in its
-place (fem-sim needs a pantograph in contact): tests/benchmarks/fe_mass_stitched_300_plus160.toml. `--keep` stores the section's histories and reuses them.
+place (fem-sim needs a pantograph in contact): tests/benchmarks/fe_mass_stitched_300_plus160.toml.
+`--keep` stores the section's histories and reuses them.
 """
 from __future__ import annotations
 
