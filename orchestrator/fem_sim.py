@@ -154,6 +154,20 @@ def span_force(run: Path) -> tuple[np.ndarray, float, str]:
     raise CaseError(f"{run}: neither steady_span.csv nor central_spans.csv")
 
 
+def correction_measures(corrections: np.ndarray, dt_s: float) -> dict:
+    """Per dropper (columns), its correction forces over one span (rows, Paper C eqs. 36-40): the largest
+    value, the steps it acts on and its impulse, the sum of correction x dt [N s].
+
+    A slack interval lasts a few steps, so its largest value depends on the time grid and on the instant
+    within the step a model applies it (the PFEM: one instant per dropper per step, its elongation
+    reduced to N_hd harmonics, Paper D sec. 3.7; fem-sim: exact at every step). The impulse, the
+    momentum the correction takes from the wire, is what both models must agree on."""
+    c = np.asarray(corrections, dtype=float)
+    return {"correction_max_N": c.max(axis=0).tolist(),
+            "slack_steps": np.count_nonzero(c > 0, axis=0).tolist(),
+            "correction_impulse_Ns": (c.sum(axis=0) * dt_s).tolist()}
+
+
 def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
     """`pantohil compare`: the 20 Hz contact force of two run folders, their stds and RMS difference."""
     fa, dta, la = span_force(a)
@@ -179,7 +193,9 @@ def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
         da = np.loadtxt(ca, delimiter=",", skiprows=1, ndmin=2)
         db = np.loadtxt(cb, delimiter=",", skiprows=1, ndmin=2)
         if da.shape == db.shape:
-            res["dropper_correction_max_N"] = {"a": da[:, 1:].max(axis=0).tolist(), "b": db[:, 1:].max(axis=0).tolist()}
+            ma, mb = correction_measures(da[:, 1:], dta), correction_measures(db[:, 1:], dtb)
+            for key in ma:
+                res[f"dropper_{key}"] = {"a": ma[key], "b": mb[key]}
             report.plot_dropper_comparison(out_dir / "dropper_corrections.png", da, db, la, lb)
     report.write_json_atomic(out_dir / "compare.json", res)
     return res
