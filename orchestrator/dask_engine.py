@@ -60,6 +60,20 @@ def worker_count(client) -> int:
     return len(client.scheduler_info().get("workers", {}))
 
 
+def _as_completed_interruptible(completed, poll_s: float = 0.2):
+    """The futures of a distributed `as_completed` as they finish, waiting in slices of `poll_s`: the kernel
+    may hand a Ctrl-C to one of the client's threads, and a main thread blocked without a timeout would
+    then never raise it (measured: a sweep whose workers were stopped ignored SIGINT for good)."""
+    import threading
+
+    pause = threading.Event()
+    while not completed.is_empty():
+        batch = completed.next_batch(block=False)
+        if not batch:
+            pause.wait(poll_s)
+        yield from batch
+
+
 def run_tasks(client, fn: Callable, items: list, keys: Iterable[str], on_result: Callable, progress: bool = True,
               desc: str = "tasks") -> None:
     """Submit fn(item) for every item and call on_result(item, result, error) as each finishes.
@@ -73,7 +87,7 @@ def run_tasks(client, fn: Callable, items: list, keys: Iterable[str], on_result:
     item_of = {f.key: item for f, item in zip(futures, items, strict=False)}
     try:
         with tqdm(total=len(futures), desc=desc, disable=not progress, unit="pt") as bar:
-            for fut in as_completed(futures):
+            for fut in _as_completed_interruptible(as_completed(futures)):
                 result, error = None, None
                 try:
                     result = fut.result()
