@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import importlib
 import math
-import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -77,7 +76,6 @@ def create_slaves(case: Case, parameters: dict[str, dict]) -> dict:
             slave.enter_initialization_mode()
             slave.exit_initialization_mode()
             slaves[name] = slave
-        shutil.rmtree(tmp, ignore_errors=True)
     return slaves
 
 
