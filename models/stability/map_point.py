@@ -18,8 +18,8 @@ from scipy.optimize import minimize_scalar
 from pantohil.models.hil.loop import HilSettings
 from pantohil.models.pantograph.linear import LinearPantograph, linear_pantograph
 from pantohil.models.pantograph.lumped import PantographParameters
-from pantohil.models.stability.maps import (circulant_dense, circulant_range_basis, range_basis, reduced_span_map,
-    span_map, step_matrix)
+from pantohil.models.stability.maps import (circulant_dense, circulant_range_basis, range_basis,
+    reduced_span_parts, span_map, step_matrix)
 from pantohil.models.stability.rig_map import (LOOP_CONNECTIONS, RigLoop, rig_span_maps, rig_span_parts, span_rate,
     step_rate)
 from pantohil.models.stability.step_roots import step_loop, step_spectral_radius
@@ -54,6 +54,8 @@ class StabilityProblem:
                 self.I_cc = circulant_dense(self.kernel)
             if self.basis is None:
                 self.basis = circulant_range_basis(self.kernel) if self.kernel is not None else range_basis(self.I_cc)
+            self._span_parts = reduced_span_parts(self.I_cc, self.pantograph, self.delay_steps, self.latency_steps,
+                                                  self.basis)
 
     def settings(self, mu: float) -> HilSettings:
         """The HIL settings of the problem at relaxation mu."""
@@ -62,8 +64,7 @@ class StabilityProblem:
     def spectral_radius(self, mu: float) -> float:
         """rho(A) of Paper D eq. (13) at relaxation mu."""
         if self.update == "span":
-            return reduced_span_map(self.I_cc, self.pantograph, self.settings(mu), self.latency_steps,
-                                    self.basis).spectral_radius
+            return self._span_parts.at(mu).spectral_radius
         if self.kernel is not None:
             rho = step_spectral_radius(self._loop, mu)
             if math.isnan(rho):

@@ -116,19 +116,34 @@ def circulant_range_basis(kernel: np.ndarray, rtol: float = 1e-10) -> np.ndarray
     return np.column_stack(cols)
 
 
-def reduced_span_map(I_cc: np.ndarray, pan: LinearPantograph, settings: HilSettings, latency_steps: int,
-                     basis: np.ndarray | None = None) -> SpanMap:
-    """Span-by-span A (Paper D eqs. A.1-A.11) on z = Q a, z_older = Q c with Q a basis of range(I_cc)."""
-    if settings.update != "span":
-        raise ValueError("reduced_span_map is for span-by-span updating")
+@dataclass
+class ReducedSpanParts:
+    """The span-by-span map on the range of I_cc split by its dependence on mu_c: every row but the new
+    iterate's is independent of mu, and that row is mu P + (1 - mu) a (Paper D eq. A.8), so a search over mu
+    runs the pantograph over the span once."""
+    rows_before: np.ndarray  # z_older's new value (= the current a)
+    a: np.ndarray  # the rows of the current iterate a, for (1 - mu) a
+    P: np.ndarray  # Q^T I_cc F: the iterate the span's forces give
+    rows_after: np.ndarray  # pantograph, force and heights in flight at the span's end
+    blocks: dict
+
+    def at(self, mu: float) -> SpanMap:
+        """A at relaxation mu (Paper D eq. A.8 in the basis)."""
+        a_new = mu * self.P + (1 - mu) * self.a
+        return SpanMap(np.vstack([self.rows_before, a_new, self.rows_after]), self.blocks, floor=abs(1 - mu))
+
+
+def reduced_span_parts(I_cc: np.ndarray, pan: LinearPantograph, delay_steps: int, latency_steps: int,
+                       basis: np.ndarray | None = None) -> ReducedSpanParts:
+    """Span-by-span A (Paper D eqs. A.1-A.11) on z = Q a, z_older = Q c with Q a basis of range(I_cc), in the
+    parts that do not depend on the relaxation."""
     Q = range_basis(I_cc) if basis is None else basis
     n, r = Q.shape
     lag = latency_steps - 1
     blocks, dim = _layout({"z_older": r, "z": r, "pantograph": pan.size, "force": 1, "in_flight": lag})
     X = np.eye(dim)
     c, a = X[blocks["z_older"]], X[blocks["z"]]
-    D = settings.delay_steps
-    targets = (np.arange(n) + D) % n
+    targets = (np.arange(n) + delay_steps) % n
     w_new = (np.arange(n) + 1) / n
     # every command of the span at once, Paper D eq. (3) with the delay rotation (A.11)
     commands = (1 - w_new)[:, None] * (Q[targets] @ c) + w_new[:, None] * (Q[targets] @ a)
@@ -143,11 +158,17 @@ def reduced_span_map(I_cc: np.ndarray, pan: LinearPantograph, settings: HilSetti
         z_act = z_act_all[n_bar]
         pan_state = Pp @ pan_state + np.outer(pz, z_act) + np.outer(pf, force)
         force = cc @ pan_state + cz * z_act
-    mu = settings.relaxation
-    a_new = mu * (Q.T @ (I_cc @ block_force)) + (1 - mu) * a  # eq. (A.8) in the basis
-    rows = [a, a_new, pan_state, force[None, :]]
-    rows += [commands[n - lag:]] if lag else []
-    return SpanMap(np.vstack(rows), blocks, floor=abs(1 - mu))
+    after = [pan_state, force[None, :]] + ([commands[n - lag:]] if lag else [])
+    return ReducedSpanParts(a, a, Q.T @ (I_cc @ block_force), np.vstack(after), blocks)
+
+
+def reduced_span_map(I_cc: np.ndarray, pan: LinearPantograph, settings: HilSettings, latency_steps: int,
+                     basis: np.ndarray | None = None) -> SpanMap:
+    """Span-by-span A (Paper D eqs. A.1-A.11) on z = Q a, z_older = Q c with Q a basis of range(I_cc)."""
+    if settings.update != "span":
+        raise ValueError("reduced_span_map is for span-by-span updating")
+    parts = reduced_span_parts(I_cc, pan, settings.delay_steps, latency_steps, basis)
+    return parts.at(settings.relaxation)
 
 
 def step_matrix(kernel: np.ndarray, pan: LinearPantograph, settings: HilSettings, latency_steps: int) -> SpanMap:

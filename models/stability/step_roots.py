@@ -84,10 +84,13 @@ def _p_logderiv(loop: StepLoop, lam: np.ndarray, mu: float) -> np.ndarray:
     n, lag = loop.n, loop.lag
     k = np.arange(n + 1)
     coef = np.concatenate([[0.0], loop.kappa[1:], [loop.kappa[0]]])  # P_K = kappa_0 lam^N + sum kappa_k lam^k
+    powers = np.empty((len(lam), n + 1), dtype=complex)
+    powers[:, 0] = 1.0
+    powers[:, 1:] = lam[:, None]
     with np.errstate(under="ignore"):
-        powers = np.exp(np.outer(np.log(lam), k))
+        np.cumprod(powers, axis=1, out=powers)
     P_K = powers @ coef
-    dP_K = (powers[:, :-1] * k[1:]) @ coef[1:]
+    dP_K = powers[:, :-1] @ (k[1:] * coef[1:])
     diff = lam[:, None] - loop.h_poles
     d_H = np.prod(diff, axis=1)
     dlog_dH = (1.0 / diff).sum(axis=1)
@@ -122,9 +125,9 @@ def _f_far(loop: StepLoop, lam: np.ndarray, mu: float) -> tuple[np.ndarray, np.n
     harmonic both factors of a term are small; at the distances the roots keep from them (~1/N) the
     relative error is ~1e-13."""
     n, lag = loop.n, loop.lag
-    x = loop.w[None, :] / lam[:, None]
-    S = (loop.b / (1.0 - x)).sum(axis=1)
-    dS = -(loop.b * x / (1.0 - x) ** 2).sum(axis=1) / lam
+    inv = 1.0 / (lam[:, None] - loop.w[None, :])  # b_p / (1 - w_p / lambda) = b_p lambda / (lambda - w_p)
+    S = lam * (inv @ loop.b)
+    dS = -((inv * inv) @ (loop.b * loop.w))
     lam_n = lam ** (-n)
     K = (1.0 - lam_n) * S
     dK = n * lam_n / lam * S + (1.0 - lam_n) * dS
@@ -145,15 +148,36 @@ def _unperturbed(n: int, mu: float, branches: np.ndarray) -> np.ndarray:
 def _branch_roots(loop: StepLoop, mu: float, branches: np.ndarray, iterations: int = 8):
     """Newton on f from the unperturbed roots (1 - mu)^(1/N) w^j, for branches away from the harmonics.
     Returns the roots and a mask of those that settled close to their own start (the others are left to
-    the Aberth iteration: a strongly disturbed branch may have been drawn to a neighbour's root)."""
+    the Aberth iteration: a strongly disturbed branch may have been drawn to a neighbour's root).
+
+    f has real coefficients, so for mu < 1 the root of branch N - j is the conjugate of branch j's: when every
+    branch above N/2 has its mirror among the branches (sorted, as `np.setdiff1d` gives them), only the
+    branches up to N/2 are solved."""
+    n = loop.n
+    upper = branches[2 * branches <= n]
+    lower = branches[2 * branches > n]
+    if mu < 1.0 and len(lower) and np.isin(n - lower, upper).all():
+        lam_u, good_u = _newton_roots(loop, mu, upper, iterations)
+        mirror = np.searchsorted(upper, n - lower)
+        return (np.concatenate([lam_u, np.conj(lam_u[mirror])]),
+                np.concatenate([good_u, good_u[mirror]]))
+    return _newton_roots(loop, mu, branches, iterations)
+
+
+def _newton_roots(loop: StepLoop, mu: float, branches: np.ndarray, iterations: int):
+    """Newton on f from the unperturbed roots of `branches`; the roots and the mask of those that settled."""
     start = _unperturbed(loop.n, mu, branches)
     lam = start.copy()
-    step = np.full(len(lam), np.inf)
+    step = np.full(len(lam), np.inf, dtype=complex)
+    moving = np.arange(len(lam))
     with np.errstate(all="ignore"):
-        for _ in range(iterations):
-            f, df = _f_far(loop, lam, mu)
-            step = f / df
-            lam = lam - step
+        for _ in range(iterations):  # a root stops once its step is below the tolerance
+            f, df = _f_far(loop, lam[moving], mu)
+            step[moving] = f / df
+            lam[moving] -= step[moving]
+            moving = moving[~(np.abs(step[moving]) <= 1e-14)]
+            if len(moving) == 0:
+                break
     spacing = 2 * np.pi / loop.n * np.abs(start)
     good = np.isfinite(lam) & (np.abs(step) <= 1e-12) & (np.abs(lam - start) <= 0.25 * spacing)
     return lam, good
