@@ -69,13 +69,14 @@ class _UnitResponses:
     def __init__(self, solver: _Banded, keep: int = 16):
         self.solver, self.keep, self.cache = solver, keep, {}
 
-    def combination(self, row: sparse.csr_matrix) -> np.ndarray:
-        out = np.zeros(row.shape[1])
-        for j, w in zip(row.indices, row.data, strict=False):
+    def combination(self, dofs: np.ndarray, weights: np.ndarray, n: int) -> np.ndarray:
+        """sum_j w_j S e_j over the given dofs (the response to a load spread by shape-function weights)."""
+        out = np.zeros(n)
+        for j, w in zip(dofs.tolist(), weights.tolist(), strict=True):
             if j not in self.cache:
                 if len(self.cache) >= self.keep:
                     self.cache.pop(next(iter(self.cache)))
-                e = np.zeros(row.shape[1])
+                e = np.zeros(n)
                 e[j] = 1.0
                 self.cache[j] = self.solver.solve(e)
             out += w * self.cache[j]
@@ -179,13 +180,13 @@ def _free_step(model: SectionModel, K, M, dash, solver, a, b, g, dt, u, v, acc, 
     return u_pred, v_pred, acc_free, u_free
 
 
-def _contact_influence(model: SectionModel, unit, scale, nf, s_row, z_static_next, u_free):
-    """The contact point's load vector, its unit response and the free wire height and dropper elongations."""
+def _contact_influence(model: SectionModel, unit, scale, nf, ri, rv, z_static_next, u_free):
+    """The contact point's load vector, its unit response and the free wire height and dropper elongations
+    (`ri`, `rv`: the dofs and weights of the contact line's shape row at the point)."""
     d_lo, d_up = model.d_lo, model.d_up
-    ri, rv = s_row.indices, s_row.data
     n_c = np.zeros(nf)
     n_c[ri] = rv
-    g_c = unit.combination(s_row) * scale  # displacement per unit contact force
+    g_c = unit.combination(ri, rv, nf) * scale  # displacement per unit contact force
     z_free = z_static_next + rv @ u_free[ri]
     z_per_fc = float(rv @ g_c[ri])
     dL_free = u_free[d_up] - u_free[d_lo]
@@ -239,65 +240,90 @@ def _solve_active_set(model: SectionModel, G, E_dd, nd, droppers_slacken, slack,
     return in_contact, idx, fc_new, corr_new, slack
 
 
+class SectionStepper:
+    """The HHT step of a section with the pantograph in penalty contact and slackening droppers (Paper C sec. 6):
+    the state (displacement, velocity, acceleration, the last step's load, the slack set) and one step."""
+
+    def __init__(self, model: SectionModel, pan: PantographParameters, dt_s: float, droppers_slacken: bool,
+                 hht: HhtConstants, reference_height_m: float, z_static_start: float, keep_unit_responses: int = 16):
+        self.model, self.dt, self.hht, self.droppers_slacken = model, dt_s, hht, droppers_slacken
+        (self.K, self.M, self.dash, self.nf, self.solver, self.unit, self.nd, self.scale, self.G,
+         self.E_dd) = _section_operators(model, hht, dt_s)
+        self.unit.keep = keep_unit_responses
+        self.pantograph = ChainPantograph(pan, dt_s, reference_height_m, hht)
+        self.f_c = self.pantograph.settle(float(z_static_start))
+        self.u, self.v, self.acc = np.zeros(self.nf), np.zeros(self.nf), np.zeros(self.nf)
+        self.F_old = np.zeros(self.nf)  # load vector of the previous step (contact + corrections)
+        self.corr = np.zeros(self.nd)
+        self.slack = np.zeros(self.nd, dtype=bool)
+
+    def start_load(self, ri: np.ndarray, rv: np.ndarray) -> None:
+        """The settled pantograph's force on the shape row where it starts, as the previous step's load."""
+        self.F_old[ri] = rv * self.f_c
+
+    def step(self, ri: np.ndarray, rv: np.ndarray, z_static_next: float) -> float:
+        """One step to the contact point with shape row (ri, rv) and static height z_static_next; returns the
+        pantograph's contact force."""
+        model, hht, dt = self.model, self.hht, self.dt
+        a, b, g = hht.alpha, hht.beta, hht.gamma
+        u_pred, v_pred, acc_free, u_free = _free_step(model, self.K, self.M, self.dash, self.solver, a, b, g, dt,
+                                                      self.u, self.v, self.acc, self.F_old)
+        ri, rv, n_c, g_c, z_free, z_per_fc, dL_free, dL_per_fc = _contact_influence(
+            model, self.unit, self.scale, self.nf, ri, rv, z_static_next, u_free)
+        # the pantograph's step is affine in the wire height: f = A + B z for a contact state
+        p = self.pantograph
+        fa = _pantograph_force(p, 0.0)
+        fb = _pantograph_force(p, 1.0) - fa
+        in_contact, idx, fc_new, corr, self.slack = _solve_active_set(
+            model, self.G, self.E_dd, self.nd, self.droppers_slacken, self.slack, fa, fb, ri, rv, z_free, z_per_fc,
+            dL_free, dL_per_fc)
+        self.corr = corr
+        f_c = fc_new if in_contact else 0.0
+        F_new = n_c * f_c
+        if len(idx):
+            np.add.at(F_new, model.d_lo[idx], corr[idx])
+            np.add.at(F_new, model.d_up[idx], -corr[idx])
+        acc_new = acc_free + (g_c * f_c + (self.G[:, idx] @ corr[idx] if len(idx) else 0.0)) / (b * dt * dt)
+        self.u = u_pred + b * dt * dt * acc_new
+        self.v = v_pred + g * dt * acc_new
+        self.acc = acc_new
+        self.F_old = F_new
+        return p.step(float(z_static_next + rv @ self.u[ri]))
+
+    def dropper_forces(self) -> np.ndarray:
+        """Total force of every dropper now (tension >= 0)."""
+        m = self.model
+        return np.maximum(m.f0 + m.kd * (self.u[m.d_up] - self.u[m.d_lo]) + self.corr, 0.0)
+
+
 def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: float, droppers_slacken: bool = True,
                       hht: HhtConstants | None = None, progress=None,
                       reference_height_m: float | None = None) -> FeSimResult:
     """HHT time integration of a section with the pantograph in penalty contact and slackening droppers."""
     t0 = time.perf_counter()
     hht = hht if hht is not None else HhtConstants()
-    a, b, g, dt = hht.alpha, hht.beta, hht.gamma, dt_s
-    K, M, dash, nf, solver, unit, nd, scale, G, E_dd = _section_operators(model, hht, dt)
-    d_lo, d_up, f0, kd = model.d_lo, model.d_up, model.f0, model.kd
-    sup_dofs = model.recorded
-    shapes_all, z_static, x_all = model.shapes, model.z_static, model.x_m
+    shapes_all, z_static, x_all = model.shapes.tocsr(), model.z_static, model.x_m
     n_steps = len(x_all) - 1
     ref = float(z_static[0]) if reference_height_m is None else reference_height_m
-    p = ChainPantograph(pan, dt, ref, hht)
-    f_c = p.settle(float(z_static[0]))
-    u = np.zeros(nf)
-    v = np.zeros(nf)
-    acc = np.zeros(nf)
-    F_old = shapes_all[0].toarray().ravel() * f_c  # load vector of the previous step (contact + corrections)
     # the static state is under gravity only: the pantograph enters at the anchor, where the wire is held
-    corr = np.zeros(nd)
+    st = SectionStepper(model, pan, dt_s, droppers_slacken, hht, ref, float(z_static[0]))
+    indptr, indices, data = shapes_all.indptr, shapes_all.indices, shapes_all.data
+    st.start_load(indices[indptr[0]:indptr[1]], data[indptr[0]:indptr[1]])
+    nd = st.nd
     forces = np.zeros(n_steps)
-    contact = np.zeros(n_steps, dtype=bool)
     dforce = np.zeros((n_steps, nd), dtype=np.float32)
     dcorr = np.zeros((n_steps, nd), dtype=np.float32)
-    uplift = np.zeros((n_steps, len(sup_dofs)), dtype=np.float32)
-    slack = np.zeros(nd, dtype=bool)
+    uplift = np.zeros((n_steps, len(model.recorded)), dtype=np.float32)
     for k in range(n_steps):
-        u_pred, v_pred, acc_free, u_free = _free_step(model, K, M, dash, solver, a, b, g, dt, u, v, acc, F_old)
-        ri, rv, n_c, g_c, z_free, z_per_fc, dL_free, dL_per_fc = _contact_influence(
-            model, unit, scale, nf, shapes_all[k + 1], z_static[k + 1], u_free)
-        # the pantograph's step is affine in the wire height: f = A + B z for a contact state
-        fa = _pantograph_force(p, 0.0)
-        fb = _pantograph_force(p, 1.0) - fa
-        in_contact, idx, fc_new, corr_new, slack = _solve_active_set(
-            model, G, E_dd, nd, droppers_slacken, slack, fa, fb, ri, rv, z_free, z_per_fc, dL_free, dL_per_fc)
-        corr = corr_new
-        f_c = fc_new if in_contact else 0.0
-        F_new = n_c * f_c
-        if len(idx):
-            np.add.at(F_new, d_lo[idx], corr[idx])
-            np.add.at(F_new, d_up[idx], -corr[idx])
-        acc_new = acc_free + (g_c * f_c + (G[:, idx] @ corr[idx] if len(idx) else 0.0)) / (b * dt * dt)
-        u = u_pred + b * dt * dt * acc_new
-        v = v_pred + g * dt * acc_new
-        acc = acc_new
-        F_old = F_new
-        z_c = z_static[k + 1] + rv @ u[ri]
-        f_pan = p.step(float(z_c))
-        forces[k] = f_pan
-        contact[k] = f_pan > 0
-        dL = u[d_up] - u[d_lo]
-        dforce[k] = np.maximum(f0 + kd * dL + corr, 0.0)
-        dcorr[k] = corr
-        uplift[k] = u[sup_dofs]
+        row = slice(indptr[k + 1], indptr[k + 2])
+        forces[k] = st.step(indices[row], data[row], z_static[k + 1])
+        dforce[k] = st.dropper_forces()
+        dcorr[k] = st.corr
+        uplift[k] = st.u[model.recorded]
         if progress is not None and k % 500 == 0:
             progress(k, n_steps)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-    return FeSimResult(np.arange(1, n_steps + 1) * dt, x_all[1:], forces, contact, dforce, dcorr, uplift,
+    return FeSimResult(np.arange(1, n_steps + 1) * dt_s, x_all[1:], forces, forces > 0, dforce, dcorr, uplift,
                        np.zeros(0), 0, 0.0, time.perf_counter() - t0, peak)
 
 
