@@ -296,32 +296,43 @@ class SectionStepper:
         return np.maximum(m.f0 + m.kd * (self.u[m.d_up] - self.u[m.d_lo]) + self.corr, 0.0)
 
 
+def record_steps(st: SectionStepper, n_steps: int, progress=None, before_step=None):
+    """Step a section along its contact rows from the first (where the settled pantograph starts), recording
+    the contact force, the dropper forces and corrections and the recorded dofs at every step;
+    `before_step(k)` runs before step k."""
+    model = st.model
+    shapes = model.shapes.tocsr()
+    indptr, indices, data = shapes.indptr, shapes.indices, shapes.data
+    st.start_load(indices[indptr[0]:indptr[1]], data[indptr[0]:indptr[1]])
+    forces = np.zeros(n_steps)
+    dforce = np.zeros((n_steps, st.nd), dtype=np.float32)
+    dcorr = np.zeros((n_steps, st.nd), dtype=np.float32)
+    uplift = np.zeros((n_steps, len(model.recorded)), dtype=np.float32)
+    for k in range(n_steps):
+        if before_step is not None:
+            before_step(k)
+        row = slice(indptr[k + 1], indptr[k + 2])
+        forces[k] = st.step(indices[row], data[row], model.z_static[k + 1])
+        dforce[k] = st.dropper_forces()
+        dcorr[k] = st.corr
+        uplift[k] = st.u[model.recorded]
+        if progress is not None and k % 500 == 0:
+            progress(k, n_steps)
+    return forces, dforce, dcorr, uplift
+
+
 def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: float, droppers_slacken: bool = True,
                       hht: HhtConstants | None = None, progress=None,
                       reference_height_m: float | None = None) -> FeSimResult:
     """HHT time integration of a section with the pantograph in penalty contact and slackening droppers."""
     t0 = time.perf_counter()
     hht = hht if hht is not None else HhtConstants()
-    shapes_all, z_static, x_all = model.shapes.tocsr(), model.z_static, model.x_m
+    z_static, x_all = model.z_static, model.x_m
     n_steps = len(x_all) - 1
     ref = float(z_static[0]) if reference_height_m is None else reference_height_m
     # the static state is under gravity only: the pantograph enters at the anchor, where the wire is held
     st = SectionStepper(model, pan, dt_s, droppers_slacken, hht, ref, float(z_static[0]))
-    indptr, indices, data = shapes_all.indptr, shapes_all.indices, shapes_all.data
-    st.start_load(indices[indptr[0]:indptr[1]], data[indptr[0]:indptr[1]])
-    nd = st.nd
-    forces = np.zeros(n_steps)
-    dforce = np.zeros((n_steps, nd), dtype=np.float32)
-    dcorr = np.zeros((n_steps, nd), dtype=np.float32)
-    uplift = np.zeros((n_steps, len(model.recorded)), dtype=np.float32)
-    for k in range(n_steps):
-        row = slice(indptr[k + 1], indptr[k + 2])
-        forces[k] = st.step(indices[row], data[row], z_static[k + 1])
-        dforce[k] = st.dropper_forces()
-        dcorr[k] = st.corr
-        uplift[k] = st.u[model.recorded]
-        if progress is not None and k % 500 == 0:
-            progress(k, n_steps)
+    forces, dforce, dcorr, uplift = record_steps(st, n_steps, progress)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     return FeSimResult(np.arange(1, n_steps + 1) * dt_s, x_all[1:], forces, forces > 0, dforce, dcorr, uplift,
                        np.zeros(0), 0, 0.0, time.perf_counter() - t0, peak)

@@ -22,7 +22,7 @@ import numpy as np
 
 from pantohil.models.catenary.fe.definition import CatenaryDefinition
 from pantohil.models.catenary.fe.model import Section, form_find
-from pantohil.models.catenary.fe.simulation import FeSimResult, SectionModel, SectionStepper
+from pantohil.models.catenary.fe.simulation import FeSimResult, SectionModel, SectionStepper, record_steps
 from pantohil.models.catenary.pfem.blocks import hermite_shapes
 from pantohil.models.pantograph.lumped import HhtConstants, PantographParameters
 
@@ -91,24 +91,12 @@ def simulate_window(cat: CatenaryDefinition, pan: PantographParameters, layout: 
     dofs_in_span = 4 * (int(np.sum((sec.x >= B * L - 1e-9) & (sec.x <= (B + 1) * L + 1e-9))) + 1)
     st = SectionStepper(model, pan, dt_s, droppers_slacken, hht, ref, float(model.z_static[0]),
                         keep_unit_responses=dofs_in_span)
-    shapes = model.shapes
-    indptr, indices, data = shapes.indptr, shapes.indices, shapes.data
-    st.start_load(indices[indptr[0]:indptr[1]], data[indptr[0]:indptr[1]])
-    nd, n_rec = st.nd, len(model.recorded)
-    forces = np.zeros(n_steps)
-    dforce = np.zeros((n_steps, nd), dtype=np.float32)
-    dcorr = np.zeros((n_steps, nd), dtype=np.float32)
-    uplift = np.zeros((n_steps, n_rec), dtype=np.float32)
-    for k in range(n_steps):
+
+    def move_on_crossing(k: int) -> None:
         if span_of[k + 1] > span_of[k]:
             _move_window(st, src, per_span_droppers)
-        row = slice(indptr[k + 1], indptr[k + 2])
-        forces[k] = st.step(indices[row], data[row], model.z_static[k + 1])
-        dforce[k] = st.dropper_forces()
-        dcorr[k] = st.corr
-        uplift[k] = st.u[model.recorded]
-        if progress is not None and k % 500 == 0:
-            progress(k, n_steps)
+
+    forces, dforce, dcorr, uplift = record_steps(st, n_steps, progress, move_on_crossing)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     res = FeSimResult(np.arange(1, n_steps + 1) * dt_s, x_line[1:], forces, forces > 0, dforce, dcorr, uplift,
                       np.array([d[0] for d in sec.droppers]) - B * L, n_spans, L, 0.0, peak)
