@@ -99,6 +99,21 @@ class PantohilCatenary(PantohilSlave):
         self._pfem = False
         register_all(self, VARIABLES)
 
+    @property
+    def stepped_iteration(self):
+        """The HIL iteration this FMU steps (PeriodicHil or PfemHil), for an engine that steps it in process."""
+        return self._hil
+
+    @property
+    def static_heights_m(self) -> np.ndarray:
+        """The static contact-line height at the span's samples."""
+        return np.asarray(self._z0, dtype=float)
+
+    @property
+    def is_pfem(self) -> bool:
+        """Whether the operator is a PFEM's (else the ASM's)."""
+        return bool(self._pfem)
+
     def constants(self) -> dict[str, object]:
         """The operators, the profile and what the iteration precomputes from them (fixed after initialisation)."""
         if self._hil is None:

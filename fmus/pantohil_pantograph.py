@@ -34,6 +34,11 @@ class PantohilPantograph(PantohilSlave):
         register_all(self, VARIABLES)
         self._model = None
 
+    @property
+    def stepped_pantograph(self):
+        """The pantograph model this FMU steps, for an engine that steps it in process."""
+        return self._model
+
     def exit_initialization_mode(self):
         """Build the pantograph from its parameters and settle it at the actuator's starting height."""
         n = int(self.n_masses) if self.pantograph_model == 0 else 1

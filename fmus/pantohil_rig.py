@@ -39,6 +39,11 @@ class PantohilRig(PantohilSlave):
         register_all(self, VARIABLES)
         self._rig = None
 
+    @property
+    def stepped_rig(self):
+        """The rig model this FMU steps (Rig or RigChain), for an engine that steps it in process."""
+        return self._rig
+
     def _params(self) -> RigParameters:
         return RigParameters(**{f.name: getattr(self, f.name) for f in dataclasses.fields(RigParameters)})
 

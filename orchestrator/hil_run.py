@@ -421,7 +421,7 @@ def _steps(state: RunState, span: int) -> str | None:
     master, pacer, stop, dt = state.master, state.pacer, state.stop, state.case.dt_s
     i_f, i_z, f_lim, z_lim, link_col = _limits(state)
     step_observers = [o for o in state.observers if o.wants_steps]
-    if pacer is None and not step_observers and hasattr(master, "run_steps"):  # the in-process engine: a span at once
+    if pacer is None and not step_observers and master.steps_a_span_at_once:  # the in-process engine
         outcome = master.run_steps((span + 1) * state.case.samples_per_span - master.k, stop, f_lim, z_lim)
         if outcome == "diverged":
             raise _diverged(master, span, i_f, i_z, dt)

@@ -83,6 +83,8 @@ class InProcessMaster(RecordingMaster):
     """The virtual HIL's models stepped in this process with the Jacobi semantics of `JacobiMaster`,
     and its records (every real and integer output, every input, by step)."""
 
+    steps_a_span_at_once = True  # `run_steps`
+
     def __init__(self, case: Case, connections, parameters: dict[str, dict], dt: float, capacity: int):
         if tuple(map(tuple, connections)) != CONNECTIONS:
             raise ValueError("the in-process engine steps the virtual HIL's own connections only")
@@ -93,8 +95,8 @@ class InProcessMaster(RecordingMaster):
         self.values = {n: _read(s, "real", self.real_outputs[n]) for n, s in self.slaves.items()}
         self._constant_ints = {n: _read(s, "integer", self.int_outputs[n]) for n, s in self.slaves.items()}
         cat = self.slaves["catenary"]
-        self._hil, self._z0, self._pfem = cat._hil, np.asarray(cat._z0, dtype=float), bool(cat._pfem)
-        self._rig, self._pan = self.slaves["rig"]._rig, self.slaves["pantograph"]._model
+        self._hil, self._z0, self._pfem = cat.stepped_iteration, cat.static_heights_m, cat.is_pfem
+        self._rig, self._pan = self.slaves["rig"].stepped_rig, self.slaves["pantograph"].stepped_pantograph
         self._block_ns: list[float] = []  # wall time per step of each block
         self._check_outputs()
 

@@ -18,6 +18,8 @@ class RecordingMaster:
     The records are rings of `capacity` steps: step k is row k % capacity, so a run of any length
     keeps the last `capacity` steps (what the caller logs and summarises), never more."""
 
+    steps_a_span_at_once = False  # True: the master has `run_steps(count, stop, force_limit, height_limit)`
+
     def _init_records(self, descriptions: dict, connections, capacity: int) -> None:
         self.capacity = capacity
         self.real_outputs = {n: [v.name for v in d.modelVariables if v.causality == "output" and v.type == "Real"]
