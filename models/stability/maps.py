@@ -121,8 +121,7 @@ class ReducedSpanParts:
     """The span-by-span map on the range of I_cc split by its dependence on mu_c: every row but the new
     iterate's is independent of mu, and that row is mu P + (1 - mu) a (Paper D eq. A.8), so a search over mu
     runs the pantograph over the span once."""
-    rows_before: np.ndarray  # z_older's new value (= the current a)
-    a: np.ndarray  # the rows of the current iterate a, for (1 - mu) a
+    a: np.ndarray  # the rows of the current iterate a: z_older's new value, and (1 - mu) a
     P: np.ndarray  # Q^T I_cc F: the iterate the span's forces give
     rows_after: np.ndarray  # pantograph, force and heights in flight at the span's end
     blocks: dict
@@ -130,7 +129,7 @@ class ReducedSpanParts:
     def at(self, mu: float) -> SpanMap:
         """A at relaxation mu (Paper D eq. A.8 in the basis)."""
         a_new = mu * self.P + (1 - mu) * self.a
-        return SpanMap(np.vstack([self.rows_before, a_new, self.rows_after]), self.blocks, floor=abs(1 - mu))
+        return SpanMap(np.vstack([self.a, a_new, self.rows_after]), self.blocks, floor=abs(1 - mu))
 
 
 def reduced_span_parts(I_cc: np.ndarray, pan: LinearPantograph, delay_steps: int, latency_steps: int,
@@ -159,7 +158,7 @@ def reduced_span_parts(I_cc: np.ndarray, pan: LinearPantograph, delay_steps: int
         pan_state = Pp @ pan_state + np.outer(pz, z_act) + np.outer(pf, force)
         force = cc @ pan_state + cz * z_act
     after = [pan_state, force[None, :]] + ([commands[n - lag:]] if lag else [])
-    return ReducedSpanParts(a, a, Q.T @ (I_cc @ block_force), np.vstack(after), blocks)
+    return ReducedSpanParts(a, Q.T @ (I_cc @ block_force), np.vstack(after), blocks)
 
 
 def reduced_span_map(I_cc: np.ndarray, pan: LinearPantograph, settings: HilSettings, latency_steps: int,
