@@ -106,9 +106,15 @@ def circulant_range_basis(kernel: np.ndarray, rtol: float = 1e-10) -> np.ndarray
     """Real Fourier basis of the harmonics present in a circulant kernel (its range), without an SVD."""
     n = len(kernel)
     spec = np.abs(np.fft.rfft(kernel))
+    return fourier_basis(n, np.nonzero(spec > rtol * spec.max())[0])
+
+
+def fourier_basis(n: int, harmonics) -> np.ndarray:
+    """Orthonormal real Fourier basis of the given harmonics over a span of n samples: a cosine for the
+    mean and the Nyquist harmonic, a cosine and a sine for every other."""
     t = np.arange(n)
     cols = []
-    for k in np.nonzero(spec > rtol * spec.max())[0]:
+    for k in harmonics:
         if k == 0 or 2 * k == n:
             cols.append(np.cos(2 * np.pi * k * t / n) / np.sqrt(n))
         else:

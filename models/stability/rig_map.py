@@ -27,7 +27,7 @@ from pantohil.models.pantograph.linear import LinearPantograph
 from pantohil.models.rig.drive_chain import RigChain, RigSpec
 from pantohil.models.rig.drive_chain import pattern_spans as chain_pattern_spans
 from pantohil.models.rig.drive_chain import pattern_steps as chain_pattern_steps
-from pantohil.models.stability.maps import SpanMap, _layout, circulant_dense
+from pantohil.models.stability.maps import SpanMap, _layout, circulant_dense, fourier_basis
 
 LOOP_CONNECTIONS = 4  # catenary -> rig -> pantograph -> rig -> catenary, one step each (Jacobi)
 
@@ -54,14 +54,7 @@ def inverse_kernel(gains: np.ndarray | None, n: int) -> np.ndarray:
 def harmonic_basis(n: int, n_harmonics: int) -> np.ndarray:
     """Orthonormal real Fourier basis of harmonics 0..N_h-1 over a span of n samples (the range of any
     operator reduced by W~, Paper D eqs. 4-8)."""
-    t = np.arange(n)
-    cols = []
-    for k in range(n_harmonics):
-        if k == 0 or 2 * k == n:
-            cols.append(np.cos(2 * np.pi * k * t / n) / np.sqrt(n))
-        else:
-            cols += [np.cos(2 * np.pi * k * t / n) * np.sqrt(2 / n), np.sin(2 * np.pi * k * t / n) * np.sqrt(2 / n)]
-    return np.column_stack(cols)
+    return fourier_basis(n, range(n_harmonics))
 
 
 @dataclass
