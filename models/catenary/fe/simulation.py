@@ -118,29 +118,40 @@ def simulate_section(cat: CatenaryDefinition, pan: PantographParameters, n_spans
     t0 = time.perf_counter()
     ff = form_find(cat, n_spans)
     sec = ff.section
-    ends = [sec.cw_w[0], sec.cw_w[-1]]
-    free = np.union1d(ff.free(), ends) if absorbing_ends else ff.free()
-    nf = len(free)
-    pos = -np.ones(sec.ndof, dtype=int)
-    pos[free] = np.arange(nf)
-    dash = None
-    if absorbing_ends:
-        dash = np.zeros(nf)
-        dash[pos[ends]] = np.sqrt(cat.contact.tension_N * cat.contact.mass_kg_m)
     L = cat.span_m
     n_steps = int(round(n_spans * L / (speed_m_s * dt_s)))
     x_all = np.minimum(np.arange(n_steps + 1) * speed_m_s * dt_s, n_spans * L - 1e-9)
-    rows = hermite_shapes(sec.x, x_all, sec.ndof, sec.cw_w).tocsr()
-    model = SectionModel(ff.K.tocsr()[free][:, free], ff.M.tocsr()[free][:, free], cat.alpha_1_s, cat.beta_s, dash,
-                         rows[:, free].tocsr(), rows @ ff.heights, x_all,
-                         pos[np.array([d[1] for d in sec.droppers])], pos[np.array([d[2] for d in sec.droppers])],
-                         ff.dropper_tensions_N, cat.dropper_axial_stiffness_N / ff.dropper_lengths_m,
-                         pos[np.array([s[1] for s in sec.supports])])
+    model, _ = form_found_model(cat, ff, x_all, x_all, absorbing_ends)
     res = integrate_section(model, pan, dt_s, droppers_slacken, hht, progress, reference_height_m)
     res.dropper_x_m = np.array([d[0] for d in sec.droppers])
     res.n_spans, res.span_m = n_spans, L
     res.wall_s = time.perf_counter() - t0
     return res
+
+
+def form_found_model(cat: CatenaryDefinition, ff, contact_x_m: np.ndarray, track_x_m: np.ndarray,
+                     absorbing_ends: bool = True) -> tuple[SectionModel, np.ndarray]:
+    """A form-found section in the integrator's form, with the contact point at `contact_x_m` in the section
+    at each step (`track_x_m`: its position along the line): the matrices on the free dofs (with
+    `absorbing_ends`, the contact wire's end heights freed and held by dashpots of impedance sqrt(T m)), the
+    contact line's shape rows and static heights, the droppers and the supports. Returns the model and its
+    free dofs."""
+    sec = ff.section
+    ends = [sec.cw_w[0], sec.cw_w[-1]]
+    free = np.union1d(ff.free(), ends) if absorbing_ends else ff.free()
+    pos = -np.ones(sec.ndof, dtype=int)
+    pos[free] = np.arange(len(free))
+    dash = None
+    if absorbing_ends:
+        dash = np.zeros(len(free))
+        dash[pos[ends]] = np.sqrt(cat.contact.tension_N * cat.contact.mass_kg_m)
+    rows = hermite_shapes(sec.x, contact_x_m, sec.ndof, sec.cw_w).tocsr()
+    model = SectionModel(ff.K.tocsr()[free][:, free], ff.M.tocsr()[free][:, free], cat.alpha_1_s, cat.beta_s, dash,
+                         rows[:, free].tocsr(), rows @ ff.heights, track_x_m,
+                         pos[np.array([d[1] for d in sec.droppers])], pos[np.array([d[2] for d in sec.droppers])],
+                         ff.dropper_tensions_N, cat.dropper_axial_stiffness_N / ff.dropper_lengths_m,
+                         pos[np.array([s[1] for s in sec.supports])])
+    return model, free
 
 
 def _section_operators(model: SectionModel, hht: HhtConstants, dt: float):

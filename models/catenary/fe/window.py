@@ -22,8 +22,7 @@ import numpy as np
 
 from pantohil.models.catenary.fe.definition import CatenaryDefinition
 from pantohil.models.catenary.fe.model import Section, form_find
-from pantohil.models.catenary.fe.simulation import FeSimResult, SectionModel, SectionStepper, record_steps
-from pantohil.models.catenary.pfem.blocks import hermite_shapes
+from pantohil.models.catenary.fe.simulation import FeSimResult, SectionStepper, form_found_model, record_steps
 from pantohil.models.pantograph.lumped import HhtConstants, PantographParameters
 
 
@@ -67,26 +66,17 @@ def simulate_window(cat: CatenaryDefinition, pan: PantographParameters, layout: 
     W, B = layout.spans, layout.behind
     ff = form_find(cat, W)
     sec = ff.section
-    ends = [sec.cw_w[0], sec.cw_w[-1]]
-    free = np.union1d(ff.free(), ends)
-    pos = -np.ones(sec.ndof, dtype=int)
-    pos[free] = np.arange(len(free))
-    dash = np.zeros(len(free))
-    dash[pos[ends]] = np.sqrt(cat.contact.tension_N * cat.contact.mass_kg_m)
     ahead = dof_one_span_ahead(sec)
-    src = np.where(ahead[free] >= 0, pos[np.maximum(ahead[free], 0)], -1)  # free dof <- free dof one span ahead
     L = cat.span_m
     n_steps = int(round(n_spans * L / (speed_m_s * dt_s)))
     x_line = np.arange(n_steps + 1) * speed_m_s * dt_s
     span_of = np.floor(x_line / L + 1e-12).astype(int)
     x_local = B * L + np.minimum(x_line - span_of * L, L - 1e-9)
-    rows = hermite_shapes(sec.x, x_local, sec.ndof, sec.cw_w).tocsr()
+    model, free = form_found_model(cat, ff, x_local, x_line)
+    pos = -np.ones(sec.ndof, dtype=int)
+    pos[free] = np.arange(len(free))
+    src = np.where(ahead[free] >= 0, pos[np.maximum(ahead[free], 0)], -1)  # free dof <- free dof one span ahead
     per_span_droppers = len(cat.dropper_positions_m)
-    model = SectionModel(ff.K.tocsr()[free][:, free], ff.M.tocsr()[free][:, free], cat.alpha_1_s, cat.beta_s, dash,
-                         rows[:, free].tocsr(), rows @ ff.heights, x_line,
-                         pos[np.array([d[1] for d in sec.droppers])], pos[np.array([d[2] for d in sec.droppers])],
-                         ff.dropper_tensions_N, cat.dropper_axial_stiffness_N / ff.dropper_lengths_m,
-                         pos[np.array([s[1] for s in sec.supports])])
     ref = float(model.z_static[0]) if reference_height_m is None else reference_height_m
     dofs_in_span = 4 * (int(np.sum((sec.x >= B * L - 1e-9) & (sec.x <= (B + 1) * L + 1e-9))) + 1)
     st = SectionStepper(model, pan, dt_s, droppers_slacken, hht, ref, float(model.z_static[0]),
