@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +20,12 @@ def pantohil(*args: str, cwd: Path | None = None, timeout: float = 600) -> subpr
     """Run the installed CLI as a user would."""
     return subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", *args], cwd=cwd,
                           capture_output=True, text=True, timeout=timeout)
+
+
+def default_sigint() -> None:
+    """`preexec_fn` of a child the test will Ctrl-C: SIGINT's default disposition, as a terminal gives it, also
+    when the suite itself runs with SIGINT ignored (a background job of a shell without job control)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def load_run(folder: Path) -> tuple[dict, np.ndarray]:

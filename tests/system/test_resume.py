@@ -12,14 +12,13 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from conftest import load_run, pantohil
+from conftest import default_sigint, load_run, pantohil
 
 
 def _start_run(out):
-    # SIGINT as a terminal's Ctrl-C would send it, also when the tests themselves run with SIGINT ignored
     return subprocess.Popen([sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--out", str(out), "--quiet"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                            preexec_fn=default_sigint)
 
 
 def _saved_span(out) -> int:

@@ -12,7 +12,7 @@ import time
 import pandas as pd
 import pytest
 
-from conftest import ROOT, pantohil
+from conftest import ROOT, default_sigint, pantohil
 from pantohil.models.case import load_case
 from pantohil.orchestrator.direct import direct_solution
 
@@ -112,10 +112,8 @@ def test_an_interrupted_sweep_redoes_only_the_missing_points(tmp_path):
     try:
         cmd = [sys.executable, "-m", "pantohil.orchestrator.cli", "sweep", str(path), "--scheduler",
                f"tcp://127.0.0.1:{port}", "--out", str(out), "--quiet"]
-        # SIGINT's default disposition, also when the suite itself was started with SIGINT ignored
-        # (a background job of a shell without job control): the sweep then takes it as a Ctrl-C
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                                preexec_fn=default_sigint)
         while not ((out / "results.csv").exists() and len(rows_of(out)) >= 3):
             assert proc.poll() is None, proc.communicate()
             time.sleep(0.1)
