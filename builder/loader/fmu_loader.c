@@ -12,7 +12,8 @@
    - enforces the fixed communication step (canHandleVariableCommunicationStepSize="false"): a doStep
      whose step differs from the FMU's time_step parameter returns fmi2Error with a logged message;
    - always passes the embedded Python's error messages to the host's logger (pythonfmu drops them
-     unless logging is on), so that a missing module is named.
+     unless logging is on), so that a missing module is named;
+   - releases pythonfmu's interpreter state from an exit handler (see release_python_state_at_exit).
    Compile-time definitions: PANTOHIL_LIBPYTHON, PANTOHIL_PYTHONHOME, PANTOHIL_PYTHONPATH,
    PANTOHIL_INNER, PANTOHIL_TIME_STEP_VR. */
 #define _GNU_SOURCE
@@ -156,6 +157,20 @@ static int resolve_all(const fmi2CallbackFunctions *cb, fmi2String name, const c
     return 1;
 }
 
+/* pythonfmu's library keeps its interpreter state in a static std::shared_ptr, which the process's exit
+   destroys twice: first its C++ static destructor frees the state, then the library's ELF destructor
+   (finalizePythonInterpreter) resets the destroyed pointer, decrementing a count inside the freed block.
+   When that block sits in glibc's unsorted bin, the write corrupts the heap and the exit aborts
+   ("free(): corrupted unsorted chunks", SIGABRT) after the run's work is done. Exit handlers run in the
+   reverse order of their registration, so this one, registered once the library is open, runs before
+   its static destructors: it releases the state through the library's own function, and both later
+   destructors then find an empty pointer. */
+static void (*release_python_state)(void);
+
+static void release_python_state_at_exit(void) {
+    release_python_state();
+}
+
 static int load_inner(const fmi2CallbackFunctions *cb, fmi2String name) {
     Dl_info self;
     char path[4096];
@@ -177,6 +192,9 @@ static int load_inner(const fmi2CallbackFunctions *cb, fmi2String name) {
         py.lib = NULL;
         return 0;
     }
+    *(void **)&release_python_state = dlsym(py.lib, "finalizePythonInterpreter");
+    if (release_python_state != NULL)
+        atexit(release_python_state_at_exit);
     return 1;
 }
 
