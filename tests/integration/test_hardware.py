@@ -87,7 +87,9 @@ def test_realtime_run_through_the_emulator_matches_the_virtual_hil(default_run, 
     emu = Emulator(tmp_path)
     out = tmp_path / "rt"
     try:
-        proc = pantohil("run", "--hardware", emu.address, "--realtime", "--out", str(out), "--quiet")
+        # the receive timeout of _hardware_run: a scheduling stall of a loaded machine loses no answer
+        proc = pantohil("run", "--hardware", emu.address, "--realtime", "--out", str(out), "--quiet",
+                        "--set", "link.receive_timeout_s=1.0")
     finally:
         stats = emu.stop()
     assert proc.returncode == 0, proc.stdout + proc.stderr
