@@ -83,8 +83,8 @@ def _exit_errors(log: str) -> list[str]:
 @pytest.mark.slow
 def test_a_process_that_loaded_an_fmu_exits_without_touching_freed_memory(built, tmp_path):
     # pythonfmu's library destroys its interpreter state twice at exit (a static destructor, then its ELF
-    # destructor) unless the loader releases it first; the write into freed memory aborts one exit in a
-    # few hundred ("free(): corrupted unsorted chunks"), and valgrind reports it at every exit
+    # destructor) unless the loader releases it first; the write into freed memory now and then aborts the
+    # exit ("free(): corrupted unsorted chunks"), and valgrind reports it at every exit
     valgrind = shutil.which("valgrind")
     if valgrind is None:
         pytest.skip("no valgrind")
