@@ -115,6 +115,9 @@ def _add_rig_emulator_command(sub) -> None:
                      help="rig-paced: the rig clock's rate error against the nominal dt [ppm]")
     emu.add_argument("--jitter-us", type=number(0.0, 1e5, unit="us"), default=0.0, metavar="J",
                      help="rig-paced: each tick moved by a uniform random time in [-J, J] us")
+    emu.add_argument("--slow-motion", type=number(1.0, 1000.0), default=1.0, metavar="S",
+                     help="rig-paced: a tick every S dt of wall time, the rig still counting dt per tick (tests "
+                          "the link without a real-time deadline on a loaded machine; default 1: real time)")
     emu.add_argument("--listen", required=True, metavar="HOST:PORT", help="address to listen on")
     emu.add_argument("--case", type=Path, help="case file (TOML): the pantograph (or mass) on the rig, and its rig "
                                                "file if it names one; default: the built-in case")
@@ -479,7 +482,7 @@ def _cmd_emulator(args) -> int:
     try:
         listen = parse_endpoint(args.listen, listening=True)
         faults = Faults(args.loss, args.reorder, args.duplicate, args.corrupt, args.delay_us, args.seed)
-        pacing = RigPacing(args.paced_by, args.drift_ppm, args.jitter_us, args.seed)
+        pacing = RigPacing(args.paced_by, args.drift_ppm, args.jitter_us, args.seed, args.slow_motion)
     except ValueError as exc:
         raise CaseError(f"--listen: {exc}" if "HOST:PORT" in str(exc) else str(exc)) from None
     try:

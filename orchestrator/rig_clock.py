@@ -1,7 +1,9 @@
 """The rig controller's own clock for the rig-paced emulator, and streaming percentiles.
 
 A real controller (Paper D sec. 2: the CompactRIO's 2 ms main loop) ticks on its own oscillator,
-which drifts against the model computer's: tick k is due at t0 + k dt (1 + drift) + jitter_k.
+which drifts against the model computer's: tick k is due at t0 + k dt (1 + drift) + jitter_k. A
+slow-motion clock (factor s > 1) is due at t0 + k s dt (1 + drift) + jitter_k while the rig still
+counts dt per tick: the link's logic is tested without a 1 ms deadline on the machine.
 """
 from __future__ import annotations
 
@@ -12,12 +14,13 @@ import numpy as np
 
 
 class RigClock:
-    """Tick times of a free-running loop: nominal period dt_s, drift in ppm, uniform jitter."""
+    """Tick times of a free-running loop: nominal period dt_s, drift in ppm, uniform jitter, and a
+    slow-motion factor on the wall-clock period (1: real time)."""
 
     def __init__(self, dt_s: float, start_ns: int, drift_ppm: float = 0.0, jitter_us: float = 0.0,
-                 seed: int = 0):
+                 seed: int = 0, slow_motion: float = 1.0):
         self.dt_s = dt_s
-        self.period_ns = dt_s * 1e9 * (1.0 + drift_ppm * 1e-6)
+        self.period_ns = dt_s * 1e9 * slow_motion * (1.0 + drift_ppm * 1e-6)
         self.jitter_ns = min(jitter_us * 1e3, 0.45 * self.period_ns)  # ticks never swap places
         self.start_ns = start_ns
         self._rng = random.Random(seed)

@@ -48,6 +48,7 @@ class RigPacing:
     drift_ppm: float = 0.0
     jitter_us: float = 0.0
     seed: int = 0
+    slow_motion: float = 1.0  # wall-clock period / dt (a test of the link on a loaded machine)
 
     def __post_init__(self):
         if self.paced_by not in ("model", "rig"):
@@ -56,6 +57,8 @@ class RigPacing:
             raise ValueError(f"--drift-ppm: must be within +-10000 ppm (got {self.drift_ppm})")
         if not (math.isfinite(self.jitter_us) and 0 <= self.jitter_us <= 1e5):
             raise ValueError(f"--jitter-us: must be in [0, 100000] us (got {self.jitter_us})")
+        if not (math.isfinite(self.slow_motion) and 1 <= self.slow_motion <= 1000):
+            raise ValueError(f"--slow-motion: must be in [1, 1000] (got {self.slow_motion})")
 
     @property
     def mode(self) -> int:
@@ -343,7 +346,7 @@ class RigEmulator:
         if p.clock is None:
             if msg.seq == 0:
                 pc = self.pacing
-                p.clock = RigClock(self.dt, now, pc.drift_ppm, pc.jitter_us, pc.seed)
+                p.clock = RigClock(self.dt, now, pc.drift_ppm, pc.jitter_us, pc.seed, pc.slow_motion)
                 p.z_ref = msg.a
             return
         sent = p.sent_ns.pop(msg.seq, None)

@@ -144,10 +144,13 @@ def test_identification_through_the_adapter_and_udp(tmp_path, rig, case_file):
 @pytest.mark.realtime
 def test_identification_of_a_rig_paced_emulator(tmp_path):
     """The rig-paced emulator runs the same chain from its own clock: identified through the adapter
-    (one answer per rig sample), the Paper B rig is within 2 % and 2 deg of its model. Ticks that reused
-    an old height (answers late on a loaded machine) are kept out of the record, or at most 1 % of it
-    taken (measured: 20 reused ticks, 0.11 % / 0.06 deg); more is exit 1 and nothing written: two more tries."""
-    emu = Emulator(tmp_path, "--paced-by", "rig", "--rig", str(RIGS / "paper_b.toml"), "--case", str(CASE_B))
+    (one answer per rig sample), the Paper B rig is within 2 % and 2 deg of its model. The rig's clock runs
+    in slow motion (a tick every 5 dt of wall time), so that an answer has 5 ms, not 1 ms, on a loaded
+    machine: the test is of the link and the identification, not of the machine's speed (real time:
+    tests/benchmarks/bench_rig_paced.py). Ticks that reused an old height are kept out of the record, or
+    at most 1 % of it taken; more is exit 1 and nothing written: two more tries."""
+    emu = Emulator(tmp_path, "--paced-by", "rig", "--slow-motion", "5", "--rig", str(RIGS / "paper_b.toml"),
+                   "--case", str(CASE_B))
     out = tmp_path / "identified.toml"
     try:
         for _ in range(3):

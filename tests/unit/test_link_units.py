@@ -118,3 +118,13 @@ def test_limiter_passes_feasible_commands_unchanged():
     wanted = 0.01 * np.sin(2 * np.pi * 2 * t)
     got = np.array([limiter(w)[0] for w in wanted])
     assert np.max(np.abs(got - wanted)) < 1e-12 and limiter.limited == 0
+
+
+def test_a_slow_motion_rig_clock_stretches_the_wall_period_not_the_rig_time():
+    from pantohil.orchestrator.rig_clock import RigClock
+
+    real, slow = RigClock(0.001, 0, drift_ppm=100), RigClock(0.001, 0, drift_ppm=100, slow_motion=5)
+    for _ in range(10):
+        real.advance(), slow.advance()
+    assert slow.due_ns == 5 * real.due_ns == 5 * 11 * 1_000_100
+    assert slow.rig_time_ns(10) == real.rig_time_ns(10) == 10_000_000
