@@ -5,8 +5,9 @@
    libpython's extension modules (numpy) need its symbols global. This library, compiled by
    `pantohil build` for each FMU, therefore
    - opens libpython with RTLD_GLOBAL when the process has no Python yet (PANTOHIL_LIBPYTHON, or the
-     path recorded at build time), and sets PYTHONHOME / PYTHONPATH (if unset) to the interpreter and
-     site-packages that numpy and scipy came from at build time;
+     path recorded at build time), sets PYTHONHOME / PYTHONPATH (if unset) to the interpreter and
+     site-packages that numpy and scipy came from at build time, and starts the interpreter, which it
+     never finalizes (see start_python);
    - then opens pythonfmu's library (PANTOHIL_INNER, next to this one) and forwards every FMI 2.0
      call to it;
    - enforces the fixed communication step (canHandleVariableCommunicationStepSize="false"): a doStep
@@ -106,9 +107,34 @@ static void set_default_env(const char *name, const char *value) {
         setenv(name, value, 0);
 }
 
+/* In a host without Python the loader starts the interpreter itself, before pythonfmu's library would:
+   pythonfmu finalizes only an interpreter it started, and Py_Finalize with scipy loaded crashes at the
+   process's exit (scipy's _uarray module frees its globals while objects still point into them:
+   SIGSEGV in the collector after the run's work is done). An interpreter started here is never
+   finalized; the exit reclaims it. Py_InitializeEx(0) leaves the host's signal handlers alone, and the
+   GIL is released so that pythonfmu takes it on whichever thread calls. */
+static int start_python(void *lib, const fmi2CallbackFunctions *cb, fmi2String name, const char *path) {
+    int (*is_initialized)(void);
+    void (*initialize)(int);
+    void *(*save_thread)(void);
+    *(void **)&is_initialized = dlsym(lib, "Py_IsInitialized");
+    *(void **)&initialize = dlsym(lib, "Py_InitializeEx");
+    *(void **)&save_thread = dlsym(lib, "PyEval_SaveThread");
+    if (is_initialized == NULL || initialize == NULL || save_thread == NULL) {
+        say(cb, name, fmi2Error, "pantohil FMU: %s is not a libpython (no Py_InitializeEx)", path);
+        return 0;
+    }
+    if (!is_initialized()) {
+        initialize(0);
+        save_thread();
+    }
+    return 1;
+}
+
 /* libpython with global symbols, unless the process already has an interpreter (a Python host) */
 static int load_python(const fmi2CallbackFunctions *cb, fmi2String name) {
     const char *path;
+    void *lib;
     if (dlsym(RTLD_DEFAULT, "Py_IsInitialized") != NULL)
         return 1;
     path = getenv("PANTOHIL_LIBPYTHON");
@@ -119,14 +145,14 @@ static int load_python(const fmi2CallbackFunctions *cb, fmi2String name) {
             "to its path (this FMU was built by a Python without a shared libpython)", PANTOHIL_PY_MINOR);
         return 0;
     }
-    if (dlopen(path, RTLD_NOW | RTLD_GLOBAL) == NULL) {
+    if ((lib = dlopen(path, RTLD_NOW | RTLD_GLOBAL)) == NULL) {
         say(cb, name, fmi2Error, "pantohil FMU needs libpython 3.%s with numpy and scipy: cannot open %s (%s); "
             "set PANTOHIL_LIBPYTHON to its path", PANTOHIL_PY_MINOR, path, dlerror());
         return 0;
     }
     set_default_env("PYTHONHOME", PANTOHIL_PYTHONHOME);
     set_default_env("PYTHONPATH", PANTOHIL_PYTHONPATH);
-    return 1;
+    return start_python(lib, cb, name, path);
 }
 
 #define RESOLVE(field, symbol)                                                          \

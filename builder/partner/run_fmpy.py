@@ -6,7 +6,6 @@ the previous step. Needs only what requirements.txt lists; pantohil itself is no
     python run_fmpy.py            # runs, writes steady_span.csv, compares with reference/
 """
 import json
-import os
 import shutil
 import sys
 import tempfile
@@ -119,9 +118,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    code = main()
-    # the result is written and printed; leave without interpreter teardown: the pythonfmu binaries embed
-    # Python objects, and finalising them at exit aborted now and then ("corrupted double-linked list")
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
+    sys.exit(main())

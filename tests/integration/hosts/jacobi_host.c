@@ -15,7 +15,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "fmi2Functions.h"
 
@@ -117,8 +116,6 @@ int main(int argc, char **argv) {
     }
     for (k = steps - last; k < steps; k++) if (k >= 0) printf("value: %.17g\n", recorded[k]);
     for (int i = 0; i < n_fmus; i++) fmus[i].terminate(fmus[i].c);
-    fflush(stdout);
-    /* leave without running the libraries' destructors: pythonfmu's library now and then crashes in the
-       embedded interpreter's teardown at process exit (the FMUs' results are complete by now) */
-    _exit(0);
+    free(recorded);
+    return 0;  /* a normal exit: the libraries' destructors run (docs/fmi-hosts.md, Linux item 4) */
 }
