@@ -14,6 +14,9 @@ ROOT = Path(__file__).resolve().parents[1]
 REFERENCE_DIR = Path(__file__).resolve().parent / "reference"
 CASES_DIR = ROOT / "models" / "data" / "cases"
 CATENARIES_DIR = ROOT / "models" / "data" / "catenaries"
+# runs over the rig link wait up to 1 s for each answer: far above any scheduling stall of a loaded machine,
+# so that every answer is used (a lockstep run is then deterministic) and a lost one means a fault of the link
+PATIENT_LINK = "link.receive_timeout_s=1.0"
 
 
 def pantohil(*args: str, cwd: Path | None = None, timeout: float = 600) -> subprocess.CompletedProcess:

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from conftest import load_run, pantohil
+from conftest import PATIENT_LINK, load_run, pantohil
 from pantohil.fmus import udp_protocol as proto
 
 pytestmark = pytest.mark.network
@@ -87,9 +87,8 @@ def test_realtime_run_through_the_emulator_matches_the_virtual_hil(default_run, 
     emu = Emulator(tmp_path)
     out = tmp_path / "rt"
     try:
-        # the receive timeout of _hardware_run: a scheduling stall of a loaded machine loses no answer
         proc = pantohil("run", "--hardware", emu.address, "--realtime", "--out", str(out), "--quiet",
-                        "--set", "link.receive_timeout_s=1.0")
+                        "--set", PATIENT_LINK)
     finally:
         stats = emu.stop()
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -180,8 +179,7 @@ def test_fuzzing_the_adapter(tmp_path):
 
     emu = Emulator(tmp_path)
     port = free_port()
-    # a receive timeout far above any stall of a loaded machine: every answer is waited for
-    case = load_case(None, [f"link.local_port={port}", "link.receive_timeout_s=1.0"])
+    case = load_case(None, [f"link.local_port={port}", PATIENT_LINK])
     fmu = build_case_fmus(case, tmp_path / "fmus", 7, ("adapter",), ("127.0.0.1", emu.port))["adapter"]
     inst = FmuInstance("adapter", fmu)
     try:
@@ -255,10 +253,8 @@ def test_commands_never_exceed_the_actuator_limits(tmp_path):
 
 
 def _hardware_run(emu: Emulator, out: Path) -> subprocess.CompletedProcess:
-    # a receive timeout far above any scheduling stall, so that every answer is used and the run is
-    # deterministic: two runs against the lockstep emulator give the same span to the last bit
-    return pantohil("run", "--hardware", emu.address, "--out", str(out), "--quiet",
-                    "--set", "link.receive_timeout_s=1.0")
+    # two runs against the lockstep emulator give the same span to the last bit
+    return pantohil("run", "--hardware", emu.address, "--out", str(out), "--quiet", "--set", PATIENT_LINK)
 
 
 class Intruder:

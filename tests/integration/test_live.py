@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
+from conftest import PATIENT_LINK
 from pantohil.orchestrator.live_layout import layout_topics
 
 websockets_sync = pytest.importorskip("websockets.sync.client")
@@ -130,10 +131,9 @@ def test_rig_run_with_a_stalled_viewer_ends_normally_and_logs_the_rig_layout_top
         assert "listening on" in line, emulator.stderr.read()
         rig = line.split("listening on ")[1].split()[0]
         out = tmp_path / "rig"
-        # a receive timeout far above any scheduling stall of a loaded machine: a lost answer then means
-        # that the stalled viewer held up the link, not that the machine did
+        # with a patient link a lost answer means that the stalled viewer held up the link
         proc, url = _start_live_run(out, "--hardware", rig, "--realtime", "--rt-priority", "0",
-                                    "--set", "run.max_spans=3", "--set", "link.receive_timeout_s=1.0")
+                                    "--set", "run.max_spans=3", "--set", PATIENT_LINK)
         # a viewer that subscribes and never reads again: its socket and the server's backlog fill up
         with websockets_sync.connect(url, subprotocols=["foxglove.sdk.v1"], max_size=None, max_queue=1) as ws:
             advertised = _subscribe_all(ws)

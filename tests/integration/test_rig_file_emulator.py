@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import CASES_DIR, ROOT, load_run, pantohil
+from conftest import CASES_DIR, PATIENT_LINK, ROOT, load_run, pantohil
 from test_hardware import Emulator, rel_rms
 from pantohil.fmus import udp_protocol as proto
 from pantohil.models.case import load_case
@@ -63,9 +63,8 @@ def _run_against_the_emulator(tmp_path: Path, case_file: Path, rig: str):
     emu = Emulator(tmp_path, "--rig", str(RIGS / f"{rig}.toml"), "--case", str(case_file))
     out = tmp_path / "hardware"
     try:
-        # a receive timeout far above any stall: every answer is used, the run is deterministic
         proc = pantohil("run", str(case_file), "--hardware", emu.address, "--out", str(out), "--quiet",
-                        "--set", "link.receive_timeout_s=1.0")
+                        "--set", PATIENT_LINK)
     finally:
         stats = emu.stop()
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -121,7 +120,7 @@ def test_identification_through_the_adapter_and_udp(tmp_path, rig, case_file):
     out = tmp_path / "identified.toml"
     try:
         proc = pantohil("rig-identify", "--hardware", emu.address, "--case", str(case_file), "--out", str(out),
-                        "--set", "link.receive_timeout_s=1.0")
+                        "--set", PATIENT_LINK)
     finally:
         stats = emu.stop()
     assert proc.returncode == 0, proc.stdout + proc.stderr
