@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-from scipy import linalg, signal
 
 from .actuator import ActuatorLimits, Limiter
 
@@ -93,6 +92,10 @@ class DiscreteFilter:
     at a constant input."""
 
     def __init__(self, b, a, initial: float):
+        # scipy is imported where it is used in this module, not at its top: scipy.signal takes 0.7 s to
+        # import, and every command of the CLI imports this module (refusing a bad input needs none of it)
+        from scipy import signal
+
         a0 = float(a[0])
         self.b = [float(v) / a0 for v in b]
         self.a = [float(v) / a0 for v in a]
@@ -112,6 +115,8 @@ class DiscreteFilter:
 
 def force_filter_coefficients(path: ForcePath, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Analog Butterworth low-pass at filter_hz, bilinear transform at dt (identity if none)."""
+    from scipy import signal  # imported where used: see DiscreteFilter
+
     if path.filter_hz <= 0:
         return np.array([1.0]), np.array([1.0])
     b, a = signal.butter(path.filter_order, 2 * math.pi * path.filter_hz, analog=True)
@@ -122,6 +127,8 @@ def force_filter_coefficients(path: ForcePath, dt_s: float) -> tuple[np.ndarray,
 @lru_cache(maxsize=256)
 def _servo_transition(wn: float, zeta: float, h_ns: int) -> tuple[np.ndarray, np.ndarray]:
     """Exact transition of x' = A x + B u over h with u held (zero-order hold)."""
+    from scipy import linalg  # imported where used: see DiscreteFilter
+
     h = h_ns * 1e-12
     m = np.zeros((3, 3))
     m[0, 1] = 1.0
@@ -271,6 +278,8 @@ def analytic_response(spec: RigSpec, dt_s: float, freqs_hz) -> tuple[np.ndarray,
         wn = 2 * np.pi * hp.servo_frequency_hz
         gz = gz * wn**2 / (wn**2 - w**2 + 2j * hp.servo_damping * wn * w)
     b, a = force_filter_coefficients(fp, dt_s)
+    from scipy import signal  # imported where used: see DiscreteFilter
+
     _, gf = signal.freqz(b, a, worN=w * dt_s)
     gf = gf * np.exp(-1j * w * fp.delay_steps * dt_s)
     return gz, gf
