@@ -263,6 +263,8 @@ def analytic_response(spec: RigSpec, dt_s: float, freqs_hz) -> tuple[np.ndarray,
     held: e^{-iw tau/2} sinc(w tau/2); position loop w_n^2 / (w_n^2 - w^2 + 2 i zeta w_n w); pure
     delays e^{-iw d dt}; the force filter exactly (its bilinear form at dt).
     """
+    from scipy import signal  # imported where used: see DiscreteFilter
+
     w = 2 * np.pi * np.asarray(freqs_hz, dtype=float)
     hp, fp = spec.height, spec.force
     gz = np.exp(-1j * w * hp.delay_steps * dt_s)
@@ -278,8 +280,6 @@ def analytic_response(spec: RigSpec, dt_s: float, freqs_hz) -> tuple[np.ndarray,
         wn = 2 * np.pi * hp.servo_frequency_hz
         gz = gz * wn**2 / (wn**2 - w**2 + 2j * hp.servo_damping * wn * w)
     b, a = force_filter_coefficients(fp, dt_s)
-    from scipy import signal  # imported where used: see DiscreteFilter
-
     _, gf = signal.freqz(b, a, worN=w * dt_s)
     gf = gf * np.exp(-1j * w * fp.delay_steps * dt_s)
     return gz, gf
