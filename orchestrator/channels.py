@@ -62,9 +62,13 @@ class RowEncoder:
     def encode(self, t: np.ndarray, columns: np.ndarray) -> list[bytes]:
         """One JSON message per step from the times and the signal columns (non-finite values as null)."""
         columns = np.asarray(columns, dtype=float)
-        rows = zip(np.asarray(t, dtype=float).tolist(), columns.tolist(), strict=False)
-        if bool(np.isfinite(columns).all()):
-            return [(self._template % (ti, *row)).encode() for ti, row in rows]
+        t = np.asarray(t, dtype=float)
+        if bool(np.isfinite(columns).all()):  # every row formatted by one call, split at the newlines
+            if not len(t):
+                return []
+            values = np.column_stack([t, columns.reshape(len(t), -1)]).ravel().tolist()
+            return ((self._template + "\n") * len(t) % tuple(values)).encode().split(b"\n")[:-1]
+        rows = zip(t.tolist(), columns.tolist(), strict=False)
         return [
             json.dumps(
                 dict(zip(self.keys, [ti, *[v if math.isfinite(v) else None for v in row]], strict=False))

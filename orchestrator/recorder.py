@@ -15,7 +15,6 @@ import signal
 from pathlib import Path
 
 import numpy as np
-from mcap.writer import Writer
 
 from .channels import EVENT_SCHEMAS, RowEncoder, encode_event, event_schema, group_schema, schema_name
 from .pacing import background_priority
@@ -25,58 +24,67 @@ CHUNK_BYTES = 1 << 16  # small chunks: a file cut short loses at most one; `pant
 
 
 class McapWriter:
-    """Writes messages in the calling process."""
+    """Writes messages in the calling process, through foxglove-sdk's MCAP writer (zstd chunks).
+
+    Every channel is registered when the writer opens; a channel appears in the file with its first
+    message (foxglove-sdk writes a channel's records lazily)."""
 
     def __init__(self, path: Path, groups: dict[str, dict[str, str]], metadata: dict[str, str] | None = None):
-        self._fh = open(path, "wb")  # noqa: SIM115 (open for the writer's life, closed in close())
-        self._writer = Writer(self._fh, chunk_size=CHUNK_BYTES)
-        self._writer.start(profile="", library="pantohil")
+        import foxglove
+        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+        self._foxglove = foxglove
+        self._context = foxglove.Context()  # this file's own channels, apart from a live server's
+        options = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_threads=0, chunk_size=CHUNK_BYTES,
+                                   profile="")
+        self._writer = foxglove.open_mcap(Path(path), allow_overwrite=True, context=self._context,
+                                          writer_options=options)
         if metadata:
-            self._writer.add_metadata("run", {k: str(v) for k, v in metadata.items()})
+            self._writer.write_metadata("run", {k: str(v) for k, v in metadata.items()})
         self._channels = {}
         self._encoders = {}
         for topic, fields in groups.items():
-            sid = self._writer.register_schema(schema_name(topic), "jsonschema", group_schema(topic, fields))
-            self._channels[topic] = self._writer.register_channel(topic, "json", sid)
+            self._channels[topic] = self._channel(topic, group_schema(topic, fields))
             self._encoders[topic] = RowEncoder(fields)
-        for topic in EVENT_SCHEMAS:  # per-span channels exist from the start, also in a run that stops early
+        for topic in EVENT_SCHEMAS:
             self._event_channel(topic)
         self.messages = 0
         self._closed = False
 
+    def _channel(self, topic: str, schema: bytes):
+        fg = self._foxglove
+        return fg.Channel(topic, message_encoding="json", context=self._context,
+                          schema=fg.Schema(name=schema_name(topic), encoding="jsonschema", data=schema))
+
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
-        """Write rows (t[i], columns[i, :]) as messages of one channel."""
-        channel, add = self._channels[topic], self._writer.add_message
+        """Write rows (t[i], columns[i, :]) as messages of one channel, at log time t[i]."""
+        log = self._channels[topic].log
         encoded = self._encoders[topic].encode(t, columns)
-        for ti, data in zip(np.asarray(t, dtype=float).tolist(), encoded, strict=False):
-            ns = int(round(ti * 1e9))
-            add(channel, ns, data, ns)
+        for ns, data in zip(np.rint(np.asarray(t, dtype=float) * 1e9).astype(np.int64).tolist(), encoded,
+                            strict=False):
+            log(data, log_time=ns)
         self.messages += len(t)
 
-    def _event_channel(self, topic: str) -> int:
+    def _event_channel(self, topic: str):
         if topic not in self._channels:
-            sid = self._writer.register_schema(schema_name(topic), "jsonschema", event_schema(topic))
-            self._channels[topic] = self._writer.register_channel(topic, "json", sid)
+            self._channels[topic] = self._channel(topic, event_schema(topic))
         return self._channels[topic]
 
     def write_event(self, topic: str, t: float, record: dict) -> None:
         """Log one JSON message (a per-span record or an event) on a topic at simulated time t [s]."""
-        ns = int(round(t * 1e9))
-        self._writer.add_message(self._event_channel(topic), ns, encode_event(t, record), ns)
+        self._event_channel(topic).log(encode_event(t, record), log_time=int(round(t * 1e9)))
         self.messages += 1
 
     def flush(self) -> None:
-        """Hand what is written to the OS, so that a reader of the growing file sees whole records."""
-        self._fh.flush()
+        """Close the current chunk and hand the file's bytes to the OS, so that a reader of the growing
+        file sees whole records."""
+        self._writer.flush()
 
     def close(self) -> None:
         """Finish the MCAP file (summary and footer) once, so that it stays readable."""
         if not self._closed:
             self._closed = True
-            try:
-                self._writer.finish()
-            finally:
-                self._fh.close()
+            self._writer.close()
 
 
 PIPE_BYTES = 1 << 20  # a span of samples fits: handing it over never blocks the stepping loop
@@ -173,6 +181,9 @@ class McapRecorder:
         """Send one JSON message of a topic to the logger process."""
         self._send.send(("event", topic, t, record))
         self.messages += 1
+
+    def flush(self) -> None:
+        """Nothing to do: the logger process flushes after every message it writes."""
 
     def close(self, timeout_s: float = 120.0) -> None:
         """Tell the logger process to finish the MCAP file and wait for it, at most timeout_s."""

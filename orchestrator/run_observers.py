@@ -99,6 +99,7 @@ class McapObserver(RunObserver):
         t_s = run.master.k * self.dt_s
         self.recorder.write_event("/convergence", t_s, record)
         self.recorder.write_event("/span_force", t_s, span_force_record(span, self.dt_s, *span_forces(run, span)))
+        self.recorder.flush()
 
     def on_end(self, run) -> None:
         """Log the steps of a span cut short and finish run.mcap."""
