@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import io
 import json
+import operator
 import pickle
 from dataclasses import dataclass
 from pathlib import Path
@@ -146,6 +147,42 @@ class SerializedFmuState:
     data: bytes
 
 
+_ACCESSORS: dict = {}  # (class, type, direction, value references) -> reader or writer, shared by the instances
+
+
+def _accessor(slave, kind: type, vrs, write: bool):
+    """The function that reads (slave) or writes (slave, values) the variables `vrs` of one type, by their
+    attribute names, made once per class and list of references (a master asks for the same lists every
+    step). TypeError names a reference of another type, as pythonfmu's own accessors do."""
+    key = (type(slave), kind, write, tuple(vrs))
+    found = _ACCESSORS.get(key)
+    if found is not None:
+        return found
+    names = []
+    for vr in key[3]:
+        var = slave.vars[vr]
+        if not isinstance(var, kind):
+            raise TypeError(f"Variable with valueReference={vr} is not of type {kind.__name__}!")
+        names.append(var.local_name)
+    if write:
+        def found(obj, values):
+            for name, value in zip(names, values, strict=True):
+                setattr(obj, name, value)
+    elif not names:
+        def found(obj):
+            return []
+    else:
+        get, convert = operator.attrgetter(*names), float if kind is Real else int
+        if len(names) == 1:
+            def found(obj):
+                return [convert(get(obj))]
+        else:
+            def found(obj):
+                return [convert(v) for v in get(obj)]
+    _ACCESSORS[key] = found
+    return found
+
+
 class PantohilSlave(Fmi2Slave):
     """An FMU whose whole state can be taken and put back (fmi2GetFMUstate/fmi2SetFMUstate) and serialized
     (fmi2SerializeFMUstate/fmi2DeSerializeFMUstate), through pythonfmu's state hooks.
@@ -157,6 +194,23 @@ class PantohilSlave(Fmi2Slave):
     case. pythonfmu calls the (de)serialization hooks on the class, hence the static methods."""
 
     transient: tuple[str, ...] = ()
+
+    def get_real(self, vrs):
+        """fmi2GetReal: the values and errors of pythonfmu's, read by attribute name without its
+        per-variable closures (a fraction of the cost per call)."""
+        return _accessor(self, Real, vrs, False)(self)
+
+    def get_integer(self, vrs):
+        """fmi2GetInteger, as get_real."""
+        return _accessor(self, Integer, vrs, False)(self)
+
+    def set_real(self, vrs, values):
+        """fmi2SetReal: each value set on its variable's attribute, as pythonfmu's setter does."""
+        _accessor(self, Real, vrs, True)(self, values)
+
+    def set_integer(self, vrs, values):
+        """fmi2SetInteger, as set_real."""
+        _accessor(self, Integer, vrs, True)(self, values)
 
     def constants(self) -> dict[str, object]:
         """Name -> object fixed after initialisation: not copied into states."""

@@ -20,6 +20,7 @@ PROFILE_FILE = "profile.csv"
 OPERATOR_FILE = "operators.npz"
 RIG_RESPONSE_FILE = "rig_response.csv"
 MAX_DROPPERS = 12
+_NO_DROPPERS = np.zeros(0)  # the dropper outputs of an ASM, read every step (never written)
 ASM_FIELDS = ("tension_N", "density_kg_m", "support_stiffness_N_m2", "alpha_1_s", "beta_s")  # case keys = fields
 
 VARIABLES = [
@@ -206,7 +207,7 @@ class PantohilCatenary(PantohilSlave):
 
     def _dropper_forces(self) -> np.ndarray:
         hil = self._hil
-        return hil.current_correction if (self._hil is not None and self._pfem and hil.nd) else np.zeros(0)
+        return hil.current_correction if (hil is not None and self._pfem and hil.nd) else _NO_DROPPERS
 
 
 def _dropper_output(d: int) -> property:
