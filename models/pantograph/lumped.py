@@ -87,6 +87,18 @@ class HhtConstants:
     gamma: float = 0.55
 
 
+def _state_block(block: int, doc: str) -> tuple:
+    """Getter, setter and docstring of block `block` (u, v or a) of a ChainPantograph's state vector, as a view."""
+    def get(self) -> np.ndarray:
+        n = self.params.n
+        return self._x[block * n:(block + 1) * n]
+
+    def put(self, value) -> None:
+        n = self.params.n
+        self._x[block * n:(block + 1) * n] = value
+    return get, put, None, f"{doc} (a view of the state vector)"
+
+
 @dataclass
 class ChainPantograph:
     """HHT integration of the chain with unilateral penalty contact (Paper A sec. 2).
@@ -114,11 +126,8 @@ class ChainPantograph:
         # One HHT step is affine in x = [u, v, a, z_next, f_old, 1]: precompute x -> x_new per contact state.
         self._step_free = self._affine_step(contact=False)
         self._step_act = self._affine_step(contact=True)
-        self._x = np.zeros(3 * n + 3)
+        self._x = np.zeros(3 * n + 3)  # the state [u, v, a] and the step's inputs [z_next, f_old, 1]
         self._x[-1] = 1.0
-        self.u = np.zeros(n)
-        self.v = np.zeros(n)
-        self.acc = np.zeros(n)
         self.force = self.f_up
         self.z = self.reference_height_m
 
@@ -133,10 +142,14 @@ class ChainPantograph:
         self.force = self.kc * max(0.0, self.head_ref + u[0] - z)
         return self.force
 
+    u = property(*_state_block(0, "Displacements of the masses from the reference configuration [m]"))
+    v = property(*_state_block(1, "Velocities of the masses [m/s]"))
+    acc = property(*_state_block(2, "Accelerations of the masses [m/s2]"))
+
     @property
     def head_height(self) -> float:
         """Height of the head (mass 1) [m]."""
-        return float(self.head_ref + self.u[0])
+        return float(self.head_ref + self._x[0])
 
     def _affine_step(self, contact: bool) -> np.ndarray:
         """Matrix P with [u, v, a]_new = P [u, v, a, z_next, f_old, 1] for one HHT step (Hilber-Hughes-Taylor
@@ -165,15 +178,13 @@ class ChainPantograph:
     def step(self, z_next: float) -> float:
         """One HHT step with unilateral contact: free unless the head would penetrate the wire."""
         x = self._x
-        n = len(self.u)
-        x[:n], x[n:2 * n], x[2 * n:3 * n] = self.u, self.v, self.acc
         x[-3], x[-2] = z_next, self.force
         new = self._step_free.dot(x)  # the same product as `@` (BLAS gemv), with less overhead per call
         gap = self.head_ref + new.item(0) - z_next
         if gap > 0.0:
             new = self._step_act.dot(x)
             gap = self.head_ref + new.item(0) - z_next
-        self.u, self.v, self.acc = new[:n], new[n:2 * n], new[2 * n:]
+        x[:-3] = new  # [u, v, a] of the new step
         self.z = z_next
         self.force = self.kc * gap if gap > 0.0 else 0.0
         return self.force
