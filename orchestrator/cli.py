@@ -93,6 +93,8 @@ def _add_run_command(sub) -> None:
     run.add_argument("--resume", type=Path, metavar="RUN_FOLDER",
                      help="continue an interrupted run from the last span it saved (its case, overrides and FMUs)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--no-plots", action="store_true",
+                     help="leave the figures out of the run folder (summary.json, steady_span.csv, run.mcap stay)")
 
 
 def _add_watch_command(sub) -> None:
@@ -262,6 +264,8 @@ def _add_sweep_command(sub) -> None:
     sweep.add_argument("--engine", choices=("inprocess", "fmu"),
                        help="how each point runs: inprocess (the default, or the sweep file's sweep.engine) or "
                             "fmu (the FMUs in the fmpy master); the results are the same")
+    sweep.add_argument("--point-plots", action="store_true",
+                       help="each point's run folder with its figures too (or the sweep file's sweep.point_plots)")
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -423,7 +427,7 @@ def _cmd_run(args, stop) -> int:
             result = run_case(case, out, progress=not args.quiet, master_kind=args.master, system=system,
                               hardware=hardware, realtime=args.realtime, rt_priority=args.rt_priority,
                               live=live, live_wait=args.live_wait, checkpoint_info=checkpoint_info, resume=resume,
-                              overwrite=args.overwrite, stop=stop, engine=args.engine)
+                              overwrite=args.overwrite, stop=stop, engine=args.engine, plots=not args.no_plots)
         except RunFolderError as exc:
             raise CaseError(f"--out: {exc}") from None
         except RunInterrupted as exc:
@@ -673,7 +677,7 @@ def _cmd_sweep(args) -> int:
 
     try:
         s = run_sweep(args.file, args.out, args.scheduler, args.workers, progress=not args.quiet,
-                      engine=args.engine)
+                      engine=args.engine, point_plots=True if args.point_plots else None)
     except KeyboardInterrupt:
         print(f"interrupted: the points done so far are in {args.out / 'results.csv'}; run the same command again "
               "to run the others", file=sys.stderr)

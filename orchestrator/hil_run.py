@@ -37,7 +37,7 @@ from .case_reference import closed_form_reference as closed_form_reference  # re
 from .inprocess import ENGINES, InProcessMaster
 from .master import JacobiMaster
 from .pacing import Pacer, set_realtime_priority
-from .recorder import McapRecorder
+from .recorder import McapRecorder, McapWriter
 from .rig_clock import Percentiles
 from .run_folder import claimed_run_folder
 from .run_observers import CheckpointObserver, LiveObserver, McapObserver, RunObserver
@@ -45,6 +45,7 @@ from .run_summary import EXIT_LINK_LOST, RunSummary
 from .stopping import StopRequest, stop_on_signals
 
 MASTERS = ("fmpy", "libcosim")
+LOG_WRITERS = ("process", "inline")
 LINK_FAULT = 2
 __all__ = ["EXIT_LINK_LOST", "RunInterrupted", "RunObserver", "RunOptions", "RunSummary", "delay_plan", "run_case"]
 
@@ -110,6 +111,8 @@ class RunOptions:
     checkpoint_info: dict | None = None
     resume: dict | None = None
     engine: str = "fmu"  # "inprocess": the models stepped in this process (orchestrator/inprocess.py)
+    log_writer: str = "process"  # run.mcap written by a child process, or "inline" by this one (a Dask worker)
+    plots: bool = True  # the run's figures (convergence, contact force, dropper corrections)
 
 
 @dataclass
@@ -194,6 +197,8 @@ def run_topology(case: Case, options: RunOptions) -> Topology:
     if options.master_kind not in MASTERS:
         raise CaseError(f"master: must be one of {', '.join(MASTERS)} (got {options.master_kind!r})")
     _check_engine(options)
+    if options.log_writer not in LOG_WRITERS:
+        raise CaseError(f"log_writer: must be one of {', '.join(LOG_WRITERS)} (got {options.log_writer!r})")
     rig_paced = is_rig_paced(case, options)
     if options.hardware is not None and (options.system is not None or
                                          (options.master_kind != "fmpy" and not rig_paced)):
@@ -222,17 +227,20 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
              realtime: bool = False, rt_priority: int | None = 50, live: tuple[str, int] | None = None,
              live_wait: bool = False, checkpoint_info: dict | None = None, resume: dict | None = None, *,
              overwrite: bool = False, observers: tuple = (), stop: StopRequest | None = None,
-             engine: str = "fmu") -> RunSummary:
+             engine: str = "fmu", log_writer: str = "process", plots: bool = True) -> RunSummary:
     """Run a case into `out_dir` (new or empty; `overwrite` replaces it whole) and return its summary.
     `live` (host, port) serves the run's channels to Foxglove while it runs (`live_wait`: from a
     viewer's first subscription on); `observers` are called per step, per span and at the end.
     `checkpoint_info` (case file, overrides): save the state every span (virtual HIL, fmpy master, FMUs);
     `resume` (checkpoint.load of an interrupted run in out_dir): continue from its last saved span.
     `engine` "inprocess" steps the same models without the FMUs (virtual HIL only; same result).
+    `log_writer` "process" writes run.mcap in a child process, which finishes the file even if this one
+    dies; "inline" writes it in this process, at span ends (for a process that may not start children,
+    such as a Dask worker). `plots` False leaves the figures out of the run folder.
 
     Without `stop`, SIGINT and SIGTERM are caught for the duration of the run (main thread only)."""
     options = RunOptions(master_kind, system, hardware, realtime, rt_priority, progress, live, live_wait,
-                         checkpoint_info, resume, engine)
+                         checkpoint_info, resume, engine, log_writer, plots)
     topology = run_topology(case, options)
     plan = delay_plan(case, topology)  # validates before anything is written
     with (stop_on_signals() if stop is None else nullcontext(stop)) as request:
@@ -307,11 +315,11 @@ def _recorder(prepared: PreparedRun, groups: dict) -> McapObserver:
     case, options = prepared.case, prepared.options
     first_span = 0 if options.resume is None else options.resume["meta"]["span"] + 1
     log_name = "run.mcap" if options.resume is None else f"run_from_span_{first_span:04d}.mcap"  # the first log stays
-    recorder = McapRecorder(prepared.out_dir / log_name, groups,
-                            {"case": case.name, "dt_s": case.dt_s, "samples_per_span": case.samples_per_span,
-                             "master": options.master_kind, "engine": options.engine,
-                             "topology": prepared.topology.name,
-                             "realtime": options.realtime})
+    writer = McapRecorder if options.log_writer == "process" else McapWriter
+    recorder = writer(prepared.out_dir / log_name, groups,
+                      {"case": case.name, "dt_s": case.dt_s, "samples_per_span": case.samples_per_span,
+                       "master": options.master_kind, "engine": options.engine, "topology": prepared.topology.name,
+                       "realtime": options.realtime})
     return McapObserver(recorder, prepared.topology.groups, case.dt_s)
 
 

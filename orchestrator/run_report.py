@@ -128,7 +128,7 @@ def summarise_run(state) -> RunSummary:
     mark = state.stop.count
 
     def plots() -> bool:  # a stop during this stage skips the plots still to draw
-        return state.stop.count == mark
+        return prepared.options.plots and state.stop.count == mark
 
     k = master.k if master is not None else 0
     spans_done = k // n

@@ -7,14 +7,16 @@ A sweep file (TOML) names a case, the keys to sweep and, optionally, keys fixed 
     case = "../cases/asm_250.toml"   # relative to the sweep file; omitted: the built-in case
     kind = "run"                     # "run": a virtual HIL run per point; "direct": the closed form (Paper A)
     engine = "inprocess"             # kind "run": "inprocess" (default, the models without FMUs) or "fmu"
+    point_plots = false              # kind "run": each point's run folder with its figures too (default false)
     [set]
     "hil.relaxation" = 0.1
     [grid]
     "run.speed_kmh" = { start = 200.0, stop = 300.0, num = 12 }   # or a list of values
 
-Every combination of the grid values is a point. A point of kind "run" is `pantohil run --engine ENGINE`
-in a child process of a Dask worker (its own run folder under points/; the engine changes the time a
-point takes, not its result: the sweep's hash leaves it out); a point of kind "direct" is the ASM closed
+Every combination of the grid values is a point. A point of kind "run" is a virtual HIL run in its own
+run folder under points/: with the in-process engine, in the Dask worker itself; with the FMU engine,
+`pantohil run --engine fmu` in a child process of the worker (the engine changes the time a point takes,
+not its result: the sweep's hash leaves it out); a point of kind "direct" is the ASM closed
 form, with the extra key `direct.second_pantograph_m` for a trailing pantograph (Paper A Fig. 17). The
 results table (results.csv and results.parquet) is rewritten after every point; a restart with the same
 sweep and folder skips the points already in it.
@@ -125,7 +127,9 @@ def load_sweep(path: Path) -> dict:
     for key in ("name", "case", "kind", "plot_x", "description", "engine"):
         if key in head and not isinstance(head[key], str):
             _fail(path, f"sweep.{key} must be a string (got {head[key]!r})")
-    bad = set(head) - {"name", "case", "kind", "plot_x", "description", "engine"}
+    if not isinstance(head.get("point_plots", False), bool):
+        _fail(path, f"sweep.point_plots must be true or false (got {head['point_plots']!r})")
+    bad = set(head) - {"name", "case", "kind", "plot_x", "description", "engine", "point_plots"}
     if bad:
         _fail(path, f"unknown key sweep.{sorted(bad)[0]}")
     kind = head.get("kind", "run")
@@ -164,6 +168,7 @@ def load_sweep(path: Path) -> dict:
                   "set": fixed, "grid": values, "plot_x": plot_x}
     definition["hash"] = hashlib.sha1(json.dumps(definition, sort_keys=True, default=str).encode()).hexdigest()[:16]
     definition["engine"] = _engine(path, head.get("engine", "inprocess"))  # not hashed: the same results
+    definition["point_plots"] = head.get("point_plots", False)  # not hashed either
     return {"definition": definition, "points": points}
 
 
@@ -192,15 +197,10 @@ def sweep_point(task: dict) -> dict:
         folder = Path(task["folder"])
         if folder.exists():  # a point interrupted earlier starts afresh
             shutil.rmtree(folder)
-        cmd = [sys.executable, "-m", "pantohil.orchestrator.cli", "run"]
-        cmd += [task["case"]] if task["case"] else []
-        for o in task["overrides"]:
-            cmd += ["--set", o]
-        cmd += ["--out", str(folder), "--quiet", "--engine", task.get("engine", "inprocess")]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode not in (0, 1) or not (folder / SUMMARY).exists():
-            lines = (proc.stderr or proc.stdout).strip().splitlines()
-            raise RuntimeError(lines[-1] if lines else f"pantohil run exited with {proc.returncode}")
+        if task.get("engine", "inprocess") == "inprocess":
+            _run_in_worker(task, folder)
+        else:
+            _run_in_child(task, folder)
         s = read_summary(folder)
         cf = s.get("contact_force", {})
         out = {"status": s["status"], "converged": s["converged"], "diverged": s["diverged"], "spans": s["spans"],
@@ -210,6 +210,30 @@ def sweep_point(task: dict) -> dict:
     out["wall_s"] = time.perf_counter() - t0
     out["finished_utc"] = datetime.now(UTC).isoformat(timespec="seconds")
     return out
+
+
+def _run_in_worker(task: dict, folder: Path) -> None:
+    """A point with the in-process engine, run in the worker itself: no interpreter to start and nothing
+    to import per point; run.mcap is written inline (a Dask worker may not start processes)."""
+    from .hil_run import run_case
+
+    run_case(load_case(task["case"], task["overrides"]), folder, progress=False, engine="inprocess",
+             log_writer="inline", plots=task.get("point_plots", False))
+
+
+def _run_in_child(task: dict, folder: Path) -> None:
+    """A point with the FMU engine, as `pantohil run` in a child process: the FMUs it loads (each with the
+    Python of its own resources on sys.path) leave with the process."""
+    cmd = [sys.executable, "-m", "pantohil.orchestrator.cli", "run"]
+    cmd += [task["case"]] if task["case"] else []
+    for o in task["overrides"]:
+        cmd += ["--set", o]
+    cmd += ["--out", str(folder), "--quiet", "--engine", task.get("engine", "inprocess")]
+    cmd += [] if task.get("point_plots", False) else ["--no-plots"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode not in (0, 1) or not (folder / SUMMARY).exists():
+        lines = (proc.stderr or proc.stdout).strip().splitlines()
+        raise RuntimeError(lines[-1] if lines else f"pantohil run exited with {proc.returncode}")
 
 
 def _read_results(path: Path) -> list[dict]:
@@ -250,14 +274,23 @@ def _status_counts(rows: list[dict]) -> dict:
     return statuses
 
 
-def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers: int | None = None,
-              progress: bool = True, log=print, engine: str | None = None) -> dict:
-    """`pantohil sweep`: run the points of a sweep file on Dask, skip those done, write results. `engine`
-    ("inprocess" or "fmu") replaces the sweep file's sweep.engine."""
+def _sweep_as_run(sweep_path: Path, engine: str | None, point_plots: bool | None) -> tuple[dict, list]:
+    """The sweep's definition and points, with the command line's engine and point_plots in place of the
+    sweep file's."""
     sweep = load_sweep(sweep_path)
-    definition, points = sweep["definition"], sweep["points"]
+    definition = sweep["definition"]
     if engine is not None:
         definition["engine"] = _engine(Path(sweep_path), engine)
+    if point_plots is not None:
+        definition["point_plots"] = point_plots
+    return definition, sweep["points"]
+
+
+def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers: int | None = None,
+              progress: bool = True, log=print, engine: str | None = None, point_plots: bool | None = None) -> dict:
+    """`pantohil sweep`: run the points of a sweep file on Dask, skip those done, write results. `engine`
+    ("inprocess" or "fmu") and `point_plots` replace the sweep file's sweep.engine and sweep.point_plots."""
+    definition, points = _sweep_as_run(sweep_path, engine, point_plots)
     out = Path(out)
     marker = out / "sweep.json"
     _check_same_sweep(marker, out, definition)
@@ -274,7 +307,7 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
         log(f"{definition['name']}: {len(points)} points, {len(done)} already done, {len(todo)} to run "
             f"on {n_workers} workers")
         tasks = [{"kind": definition["kind"], "engine": definition["engine"], "case": definition["case"],
-                  "overrides": p["overrides"],
+                  "point_plots": definition["point_plots"], "overrides": p["overrides"],
                   "extra": p["extra"], "folder": str((out / "points" / p["id"]).resolve())} for p in todo]
         by_task = {id(t): p for t, p in zip(tasks, todo, strict=False)}
         t0 = time.perf_counter()
@@ -302,6 +335,7 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
     figures = plot_sweep(out, rows, definition) if rows else []
     statuses = _status_counts(rows)
     summary = {"name": definition["name"], "kind": definition["kind"], "engine": definition["engine"],
+               "point_plots": definition["point_plots"],
                "points": len(points), "skipped_done": len(done), "ran": len(rows) - len(done), "statuses": statuses,
                "workers": n_workers, "scheduler": scheduler or "LocalCluster", "wall_s": wall,
                "interrupted": interrupted, "figures": figures}

@@ -248,6 +248,9 @@ CASES = [
     ),
     _sweep("sweep-bad-key", '[grid]\n"run.colour" = [1, 2]\n', ("run.colour", "not a case key")),
     _sweep("sweep-bad-point", '[grid]\n"run.speed_kmh" = [200.0, 1e308]\n', ("run.speed_kmh", "range")),
+    Hostile("sweep-point-plots-text", ("sweep", "{sweep}", "--out", "{out}", "--quiet"),
+            ("sweep.point_plots", "true or false"),
+            sweep=SWEEP_HEAD + 'point_plots = "yes"\n[grid]\n"run.speed_kmh" = [200.0]\n'),
     Hostile("sweep-dev-zero", ("sweep", "/dev/zero", "--out", "{out}"), ("sweep file", "not a regular file")),
     Hostile(
         "sweep-section-scalar",

@@ -53,6 +53,21 @@ def check_speed_results(out):
     stds = [float(r["std_N"]) for r in sorted(rows, key=lambda r: float(r["run.speed_kmh"]))]
     assert stds == sorted(stds)  # Paper B Fig. 12: the std grows with the speed over 200-300 km/h
     assert (out / "std_vs_run_speed_kmh.png").stat().st_size > 10_000
+    assert not list((out / "points").glob("*/*.png"))  # sweep.point_plots is false by default
+
+
+def test_point_plots_put_the_run_figures_in_every_point_folder(tmp_path):
+    out = tmp_path / "sweep"
+    path = sweep_file(tmp_path, grid='"run.speed_kmh" = [220.0, 280.0]', extra='"run.max_spans" = 3')
+    proc = pantohil("sweep", str(path), "--workers", "1", "--out", str(out), "--quiet", "--point-plots")
+    assert proc.returncode == 0, proc.stderr
+    folders = sorted((out / "points").iterdir())
+    assert len(folders) == 2
+    for folder in folders:
+        assert (folder / "convergence.png").stat().st_size > 10_000
+        assert (folder / "contact_force.png").stat().st_size > 10_000
+        assert json.loads((folder / "summary.json").read_text())["spans"] == 3
+    assert json.loads((out / "summary.json").read_text())["point_plots"] is True
 
 
 def free_port():
