@@ -14,7 +14,9 @@ import os
 import signal
 from pathlib import Path
 
+import foxglove
 import numpy as np
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
 from .channels import EVENT_SCHEMAS, RowEncoder, encode_event, event_schema, group_schema, schema_name
 from .pacing import background_priority
@@ -30,10 +32,6 @@ class McapWriter:
     message (foxglove-sdk writes a channel's records lazily)."""
 
     def __init__(self, path: Path, groups: dict[str, dict[str, str]], metadata: dict[str, str] | None = None):
-        import foxglove
-        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
-
-        self._foxglove = foxglove
         self._context = foxglove.Context()  # this file's own channels, apart from a live server's
         options = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_threads=0, chunk_size=CHUNK_BYTES,
                                    profile="")
@@ -52,9 +50,8 @@ class McapWriter:
         self._closed = False
 
     def _channel(self, topic: str, schema: bytes):
-        fg = self._foxglove
-        return fg.Channel(topic, message_encoding="json", context=self._context,
-                          schema=fg.Schema(name=schema_name(topic), encoding="jsonschema", data=schema))
+        return foxglove.Channel(topic, message_encoding="json", context=self._context,
+                                schema=foxglove.Schema(name=schema_name(topic), encoding="jsonschema", data=schema))
 
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
         """Write rows (t[i], columns[i, :]) as messages of one channel, at log time t[i]."""

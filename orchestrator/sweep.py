@@ -228,7 +228,7 @@ def _run_in_child(task: dict, folder: Path) -> None:
     cmd += [task["case"]] if task["case"] else []
     for o in task["overrides"]:
         cmd += ["--set", o]
-    cmd += ["--out", str(folder), "--quiet", "--engine", task.get("engine", "inprocess")]
+    cmd += ["--out", str(folder), "--quiet", "--engine", task["engine"]]
     cmd += [] if task.get("point_plots", False) else ["--no-plots"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode not in (0, 1) or not (folder / SUMMARY).exists():
