@@ -14,7 +14,8 @@ import numpy as np
 
 CONVERGENCE_FIELDS = {"span": "span index [-]", "change": "RMS span-to-span change over the std [-] (null: first span)",
                       "mean_N": "mean force of the span [N]", "std_N": "std of the force of the span [N]",
-                      "max_N": "largest force of the span [N]", "min_N": "smallest force of the span [N]"}
+                      "max_N": "largest force of the span [N]", "min_N": "smallest force of the span [N]",
+                      "measured": "samples of the span with a measured force (the others kept the span before's) [-]"}
 
 
 def _number_schema(title: str, fields: dict[str, str]) -> dict:

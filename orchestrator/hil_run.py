@@ -14,10 +14,14 @@ from __future__ import annotations
 import gc
 import math
 import os
+import shutil
+import tempfile
 import time
 from contextlib import nullcontext, suppress
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+
+import numpy as np
 
 from pantohil.builder.build_fmus import build_case_fmus
 from pantohil.builder.system import (
@@ -46,7 +50,7 @@ from .stopping import StopRequest, stop_on_signals
 
 MASTERS = ("fmpy", "libcosim")
 LOG_WRITERS = ("process", "inline")
-LINK_FAULT = 2
+LINK_OK, LINK_FAULT = 0, 2
 __all__ = ["EXIT_LINK_LOST", "RunInterrupted", "RunObserver", "RunOptions", "RunSummary", "delay_plan", "run_case"]
 
 _CATENARY_GROUP = {"height_command": "commanded height [m]", "contact_force": "force received (NaN: not measured) [N]",
@@ -87,7 +91,8 @@ LINK_COUNTERS = ("sent", "received", "lost", "late", "reordered", "duplicated", 
                  "limited")
 RIG_PACED_COUNTERS = ("samples", "answered", "reused")
 REFUSALS = {1: "it speaks another protocol version", 2: "it refused the session start (bad HELLO)",
-            4: "it is busy with another session", 8: "it does not run that pacing (link.paced_by)"}
+            4: "it is busy with another session", 8: "it does not run that pacing (link.paced_by)",
+            256: "its STATUS reported a latency outside 0..100000 steps"}
 RECORDED_SPANS = 12  # spans the master keeps in memory: the last one, the one before and the 10 of the overlay plot
 
 
@@ -298,6 +303,10 @@ def prepare(prepared: PreparedRun) -> None:
     if options.engine == "inprocess":  # no FMUs: the master creates the models from the case
         prepared.connections = prepared.topology.connections
         prepared.parameters = {"catenary": {"delay_steps": plan["delay_steps"]}}
+    elif options.system is None and options.resume is not None:
+        prepared.fmus = _resumed_fmus(prepared)
+        prepared.connections = prepared.topology.connections
+        prepared.parameters = {"catenary": {"delay_steps": plan["delay_steps"]}}
     elif options.system is None:
         prepared.fmus = build_case_fmus(prepared.case, prepared.out_dir / "fmus", plan["delay_steps"],
                                         prepared.topology.fmus, options.hardware or ("127.0.0.1", 47800))
@@ -311,12 +320,32 @@ def prepare(prepared: PreparedRun) -> None:
     prepared.build_s = time.perf_counter() - t_build
 
 
+def _resumed_fmus(prepared: PreparedRun) -> dict[str, Path]:
+    """The FMUs of a resumed run: built apart, checked to contain what the checkpoint's did, and only then
+    put into the run folder (a refused resume leaves the folder as it was)."""
+    with tempfile.TemporaryDirectory(prefix="pantohil_resume_") as tmp:
+        built = build_case_fmus(prepared.case, Path(tmp), prepared.plan["delay_steps"], prepared.topology.fmus)
+        checkpoint.check_fmus(prepared.options.resume, built)
+        folder = prepared.out_dir / "fmus"
+        folder.mkdir(exist_ok=True)
+        for path in built.values():
+            part = folder / f".{path.name}.part"
+            shutil.copyfile(path, part)
+            os.replace(part, folder / path.name)
+        return {name: folder / path.name for name, path in built.items()}
+
+
+def _log_name(options: RunOptions) -> str:
+    """run.mcap, or for a resumed run a log of its own (the first log stays as it was)."""
+    if options.resume is None:
+        return "run.mcap"
+    return f"run_from_span_{options.resume['meta']['span'] + 1:04d}.mcap"
+
+
 def _recorder(prepared: PreparedRun, groups: dict) -> McapObserver:
     case, options = prepared.case, prepared.options
-    first_span = 0 if options.resume is None else options.resume["meta"]["span"] + 1
-    log_name = "run.mcap" if options.resume is None else f"run_from_span_{first_span:04d}.mcap"  # the first log stays
     writer = McapRecorder if options.log_writer == "process" else McapWriter
-    recorder = writer(prepared.out_dir / log_name, groups,
+    recorder = writer(prepared.out_dir / _log_name(options), groups,
                       {"case": case.name, "dt_s": case.dt_s, "samples_per_span": case.samples_per_span,
                        "master": options.master_kind, "engine": options.engine, "topology": prepared.topology.name,
                        "realtime": options.realtime})
@@ -349,10 +378,12 @@ def start(state: RunState) -> None:
     state.monitor = ConvergenceMonitor(case.samples_per_span, case.rig_period_spans())
     if options.resume is not None:
         try:
-            state.first_span = checkpoint.restore(options.resume, state.master, state.monitor, prepared.fmus)
+            state.first_span = checkpoint.restore(options.resume, state.master, state.monitor)
         except BaseException:
             mcap.recorder.close()
             state.master.close()
+            with suppress(OSError):  # the new log of a resume that did not start holds nothing
+                (prepared.out_dir / _log_name(options)).unlink()
             raise
     paced_steps = case.values["run"]["max_spans"] * case.samples_per_span
     state.pacer = Pacer(case.dt_s, paced_steps) if options.realtime else None
@@ -468,7 +499,8 @@ def step_span(state: RunState, span: int) -> tuple[str, str] | None:
         for seconds in master.column("adapter", "answer_time", start, start + n):
             if not math.isnan(seconds):  # NaN: no sample for that step
                 state.answer_us.add(seconds * 1e6)
-    rec = state.monitor.close_span(span, master.column("catenary", "force_at_sample", start, start + n))
+    measured = _measured(state, start, start + n)
+    rec = state.monitor.close_span(span, master.column("catenary", "force_at_sample", start, start + n), measured)
     for observer in state.observers:
         observer.on_span(state, span, rec)
     state.bar.update(1)
@@ -477,7 +509,12 @@ def step_span(state: RunState, span: int) -> tuple[str, str] | None:
     if not master.column(fmu, output, start, start + n).any():
         return "contact_lost", (f"contact lost: the contact force was 0 N for the whole span {span} "
                                 f"(t = {start * dt:.3f}-{(start + n) * dt:.3f} s)")
-    settled = start >= case.ramp_steps and span >= 2 and rec["change"] <= run["convergence_tol"]
+    if measured is not None:
+        data_failed = _data_failed(state, span, rec["measured"])
+        if data_failed is not None:
+            return "link_lost", data_failed
+    settled = (start >= case.ramp_steps and span >= 2 and rec["change"] <= run["convergence_tol"]
+               and (measured is None or _link_ok_at(state, start + n - 1)))
     duration_spans = -(-round(run["duration_s"] / dt) // n)
     if duration_spans and span + 1 >= duration_spans:
         return (("converged", f"converged; ran {span + 1} spans (run.duration_s)") if settled else
@@ -490,6 +527,29 @@ def step_span(state: RunState, span: int) -> tuple[str, str] | None:
                             f"(median of {run['divergence_spans']} spans, run.divergence_change "
                             f"{run['divergence_change']:g})")
     return None
+
+
+def _measured(state: RunState, start: int, stop: int) -> np.ndarray | None:
+    """On a rig, which forces the catenary received over steps start..stop were measured (not NaN: an
+    answer came); None for a virtual run, where every one is."""
+    if state.prepared.options.hardware is None:
+        return None
+    return ~np.isnan(state.master.input_column("catenary", "adapter", "measured_force", start, stop))
+
+
+def _data_failed(state: RunState, span: int, measured: int) -> str | None:
+    """Why a span with too few measured forces ends the run (link.min_measured_fraction), or None."""
+    n, share = state.case.samples_per_span, state.case.values["link"]["min_measured_fraction"]
+    if measured >= share * n:
+        return None
+    return (f"the rig's data failed: only {measured} of the {n} forces of span {span} were measured "
+            f"(link.min_measured_fraction = {share:g}); the last position is held")
+
+
+def _link_ok_at(state: RunState, k: int) -> bool:
+    """Whether the link was ok (the latest answer came) after step k: a run does not converge on a span
+    whose end the rig did not answer."""
+    return state.master.int_value("adapter", "link_state", k) == LINK_OK
 
 
 def end_stepping(state: RunState) -> None:

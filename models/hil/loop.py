@@ -124,10 +124,13 @@ class PeriodicHil:
 
 
 class ConvergenceMonitor:
-    """Span-to-span change of the measured force: rms(f^b - f^(b-P)) / std(f^b).
+    """Span-to-span change of the measured force: rms(f^b - f^(b-P)) / std(f^b), over the samples
+    measured in span b only.
 
     P = 1, unless the rig's own clocks (decimation, sub-references) repeat only every P spans: the
-    steady state then repeats every P spans, not every span."""
+    steady state then repeats every P spans, not every span. A sample that was not measured keeps the
+    previous span's value in the iteration, so its change would be exactly 0: it is left out of the
+    change, and a span with no measured sample has an infinite change (it is evidence of nothing)."""
 
     def __init__(self, samples_per_span: int, period_spans: int = 1):
         self.n = samples_per_span
@@ -135,17 +138,21 @@ class ConvergenceMonitor:
         self.history: list[dict] = []
         self._prev: list[np.ndarray] = []
 
-    def close_span(self, span: int, force: np.ndarray) -> dict:
-        """Record one finished span: its change rms(f^b - f^(b-1)) / std(f^b), mean, std, max and min."""
+    def close_span(self, span: int, force: np.ndarray, measured: np.ndarray | None = None) -> dict:
+        """Record one finished span: its change rms(f^b - f^(b-1)) / std(f^b) over the samples measured in
+        it (`measured`, a boolean mask; None: all), their count, mean, std, max and min."""
         std = float(np.std(force))
-        if len(self._prev) < self.period:
+        count = len(force) if measured is None else int(np.count_nonzero(measured))
+        if len(self._prev) < self.period or count == 0:
             change = float("inf")
         else:
-            change = float(np.sqrt(np.mean((force - self._prev[0]) ** 2)) / max(std, 1e-12))
+            diff = force - self._prev[0] if measured is None else (force - self._prev[0])[measured]
+            change = float(np.sqrt(np.mean(diff ** 2)) / max(std, 1e-12))
+        if len(self._prev) >= self.period:
             self._prev.pop(0)
         self._prev.append(force.copy())
         rec = {"span": span, "change": change, "mean_N": float(np.mean(force)), "std_N": std,
-               "max_N": float(np.max(force)), "min_N": float(np.min(force))}
+               "max_N": float(np.max(force)), "min_N": float(np.min(force)), "measured": count}
         self.history.append(rec)
         return rec
 
