@@ -10,7 +10,9 @@ in fault: the adapter keeps sending the last safe position and the master stops 
 
 The link is bound to a session (docs/udp-protocol.md): the HELLO carries a random session id, and
 only datagrams from the rig's address with that id and finite values are taken; the socket is bound
-to the interface that reaches the rig unless `local_host` names another.
+to the interface that reaches the rig unless `local_host` names another, and connected to the rig's
+address, so that the kernel drops datagrams from anywhere else before they can fill its buffer. No
+datagram with a non-finite value is ever sent.
 """
 from __future__ import annotations
 
@@ -32,6 +34,8 @@ _WINDOW = 4096  # how many recent sequence numbers are remembered for late/dupli
 _SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux; the socket module does not export it
 _ANCILLARY_BYTES = socket.CMSG_SPACE(16)
 _RCVBUF_BYTES = 4 << 20
+MAX_RIG_LATENCY_STEPS = 100_000  # a STATUS reporting more is refused (the range of hil.delay_steps)
+REFUSED_LATENCY = 256  # rig_refusal bit set by this side: the STATUS's latency is not a step count in range
 
 VARIABLES = [
     *case_variables("adapter"),
@@ -111,7 +115,8 @@ VARIABLES = [
         "output",
         "1",
         "Fault bits of the rig's refusal of the session start "
-        "(0: accepted; 1 protocol version, 2 bad HELLO, 4 busy with another session)",
+        "(0: accepted; 1 protocol version, 2 bad HELLO, 4 busy with another session, 8 other pacing; "
+        "256: refused here, a latency outside 0..100000 steps)",
         0,
     ),
 ]
@@ -163,6 +168,7 @@ class PantohilAdapter(PantohilSlave):
                 local = probe.getsockname()[0]
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind((local, int(self.local_port)))
+        self._sock.connect(self._peer)  # the kernel then takes datagrams from the rig's address only
         try:  # room for the rig's samples while the master is held up (a 2 ms rig fills 64 kB in ~0.1 s)
             self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUFFORCE, _RCVBUF_BYTES)
         except (OSError, AttributeError):
@@ -171,13 +177,18 @@ class PantohilAdapter(PantohilSlave):
             self._sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
 
     def _send(self, msg: proto.Message) -> bool:
-        if self._sock is None:
+        if self._sock is None or not proto.finite(msg):  # a non-finite value never leaves (a safety net)
             return False
-        try:
-            self._sock.sendto(proto.encode(msg, self._key), self._peer)
-            return True
-        except OSError:
-            return False
+        data = proto.encode(msg, self._key)
+        for _ in range(2):  # a refusal reported for an earlier datagram (ICMP port unreachable) fails one send
+            try:
+                self._sock.send(data)
+                return True
+            except ConnectionRefusedError:
+                continue
+            except OSError:
+                return False
+        return False
 
     def _hello(self):
         """Start a session: the rig resets and answers with its status (latency in steps), or refuses."""
@@ -187,6 +198,9 @@ class PantohilAdapter(PantohilSlave):
             if not self._send(hello):
                 break
             msg = self._receive(time.perf_counter() + 0.2, lambda m: m.type == proto.STATUS)
+            if msg is not None and msg.w == 0 and not 0 <= msg.a <= MAX_RIG_LATENCY_STEPS:
+                self.rig_refusal = REFUSED_LATENCY
+                break
             if msg is not None and msg.w == 0:
                 self.rig_latency_steps = int(round(msg.a))
                 self.session_started = 1

@@ -17,6 +17,9 @@ import secrets
 import struct
 import zlib
 from dataclasses import dataclass
+from pathlib import Path
+
+from pantohil.models.input_files import InputFileError, read_input_bytes
 
 MAGIC = 0x31484850  # b"PHH1" little-endian (kept from version 1, so an old peer is recognised)
 VERSION = 2
@@ -145,14 +148,16 @@ def v1_refusal() -> bytes:
     return body + _CRC.pack(zlib.crc32(body))
 
 
+MAX_KEY_FILE_BYTES = 64 * 1024
+
+
 def read_key(path: str) -> bytes:
     """The pre-shared key in a file: its bytes, surrounding whitespace removed, at least 16 bytes.
     ValueError with one line otherwise."""
-    try:
-        with open(path, "rb") as fh:
-            key = fh.read(4097).strip()
-    except OSError as exc:
-        raise ValueError(f"key file {path}: {exc.strerror}") from None
+    try:  # a regular file only: a FIFO or a device would hang the run or the emulator
+        key = read_input_bytes(Path(path), "key file", MAX_KEY_FILE_BYTES).strip()
+    except InputFileError as exc:
+        raise ValueError(str(exc)) from None
     if not 16 <= len(key) <= 4096:
         raise ValueError(f"key file {path}: the key must have 16 to 4096 bytes (got {len(key)})")
     return key

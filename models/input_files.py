@@ -20,15 +20,16 @@ class InputFileError(ValueError):
     """An input file that cannot be read; one line naming the file."""
 
 
-def read_input_text(path: Path, what: str, max_bytes: int = MAX_INPUT_BYTES) -> str:
-    """The text of a regular UTF-8 file of at most max_bytes bytes."""
+def read_input_bytes(path: Path, what: str, max_bytes: int = MAX_INPUT_BYTES) -> bytes:
+    """The bytes of a regular file of at most max_bytes bytes (a FIFO or a device is refused, never
+    waited on)."""
     path = Path(path)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # O_NONBLOCK: opening a FIFO must not hang
     except FileNotFoundError:
         raise InputFileError(f"{what} {path} does not exist") from None
-    except OSError as exc:
-        raise InputFileError(f"{what} {path}: {exc.strerror}") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL in the path
+        raise InputFileError(f"{what} {path}: {getattr(exc, 'strerror', None) or exc}") from None
     try:
         info = os.fstat(fd)
         if stat.S_ISDIR(info.st_mode):
@@ -45,6 +46,12 @@ def read_input_text(path: Path, what: str, max_bytes: int = MAX_INPUT_BYTES) -> 
         os.close(fd)
     if len(data) > max_bytes:
         raise InputFileError(f"{what} {path} is larger than the limit of {max_bytes} bytes")
+    return data
+
+
+def read_input_text(path: Path, what: str, max_bytes: int = MAX_INPUT_BYTES) -> str:
+    """The text of a regular UTF-8 file of at most max_bytes bytes."""
+    data = read_input_bytes(path, what, max_bytes)
     if b"\0" in data:
         raise InputFileError(f"{what} {path} is binary (it holds NUL bytes), not text")
     try:

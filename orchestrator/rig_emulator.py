@@ -23,6 +23,7 @@ import select
 import signal
 import socket
 import time
+from collections import OrderedDict
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -124,6 +125,7 @@ class EmulatorStats:
     foreign: int = 0
     nonfinite: int = 0
     bad_hello: int = 0
+    replayed: int = 0
     answers: int = 0
     dropped: int = 0
     reordered: int = 0
@@ -150,6 +152,8 @@ class Session:
     commands: int = 0
     foreign: int = 0
     nonfinite: int = 0
+    replayed: int = 0
+    last_seq: int = 0  # model-paced: the newest COMMAND executed; none at or below it is executed again
     max_abs_height_m: float = 0.0
     paced: PacedState | None = None
 
@@ -159,10 +163,12 @@ class Session:
         return {**rig_paced, "number": self.number, "peer": f"{self.peer[0]}:{self.peer[1]}", "id": f"{self.id:016x}",
                 "paced_by": "rig" if self.mode == proto.PACED_BY_RIG else "model", "dt_s": self.dt_s,
                 "commands": self.commands, "foreign": self.foreign, "nonfinite": self.nonfinite,
+                "replayed": self.replayed,
                 "max_abs_height_m": self.max_abs_height_m, "end": end}
 
 
 MIN_DT_S, MAX_DT_S = 1e-5, 1.0  # time steps a HELLO may ask for
+ENDED_SESSIONS = 4096  # ids of ended sessions remembered: a replayed HELLO cannot reopen one
 
 
 class RigEmulator:
@@ -189,6 +195,7 @@ class RigEmulator:
         self.sock.bind(listen)
         self.address = self.sock.getsockname()
         self.session: Session | None = None
+        self._ended_ids: OrderedDict = OrderedDict()
         self._held = None
         self._stop = False
 
@@ -304,6 +311,10 @@ class RigEmulator:
             self.stats.nonfinite += 1
             self._status(peer, msg.session, proto.RIG_FAULT, proto.FAULT_BAD_HELLO)
             return
+        if s is None and msg.session in self._ended_ids:  # a recorded HELLO: the ended session stays ended
+            self.stats.replayed += 1
+            self._status(peer, msg.session, proto.RIG_FAULT, proto.FAULT_BAD_HELLO, mode=self.pacing.mode)
+            return
         if (not MIN_DT_S <= msg.a <= MAX_DT_S or msg.session == 0 or msg.u != self.pacing.mode
                 or self._other_dt(msg.a)):
             self.stats.bad_hello += 1
@@ -329,7 +340,15 @@ class RigEmulator:
         return spec is not None and abs(dt - spec.model_step_s) > 1e-6 * spec.model_step_s
 
     def _command(self, msg: proto.Message, peer) -> None:
-        """Model-paced (lockstep): one step of the rig and the pantograph per COMMAND, answered by a FORCE."""
+        """Model-paced (lockstep): one step of the rig and the pantograph per COMMAND, answered by a FORCE.
+        A COMMAND whose seq is not above the newest executed one (a duplicate, a late one or a replay,
+        authenticated or not) is never executed: counted `replayed`, not answered."""
+        s = self.session
+        if msg.seq <= s.last_seq:
+            s.replayed += 1
+            self.stats.replayed += 1
+            return
+        s.last_seq = msg.seq
         self.stats.commands += 1
         self.session.commands += 1
         self._record_command(msg.a)
@@ -391,6 +410,9 @@ class RigEmulator:
             self._send(self._held, s.peer)
             self._held = None
         self.stats.session_log.append(s.record(end))
+        self._ended_ids[s.id] = True
+        if len(self._ended_ids) > ENDED_SESSIONS:
+            self._ended_ids.popitem(last=False)
         rec = self.stats.session_log[-1]
         paced = (f", {rec['samples']} samples, {rec['answered']} answered, {rec['reused']} reused, answer p50 "
                  f"{rec['answer_us']['p50']:.0f} us p99 {rec['answer_us']['p99']:.0f} us max "

@@ -1,10 +1,12 @@
 """Actuator motion limits: a command never leaves the stroke, the velocity or the acceleration limit.
 
 LinMot PS10-70x240U (Paper D sec. 2): 5.4 m/s and 1650 N; the acceleration limit is the force limit
-over the moving mass. The limiter clips the stroke and ramps the rest, one sample at a time.
+over the moving mass. The limiter clips the stroke and ramps the rest, one sample at a time. A wanted
+height that is not a number holds the actuator where it is; its state and output are always finite.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 
@@ -19,22 +21,29 @@ class ActuatorLimits:
     def __post_init__(self):
         if not self.stroke_min_m < self.stroke_max_m:
             raise ValueError("actuator stroke: the minimum must be below the maximum")
-        if self.max_velocity_m_s <= 0 or self.max_acceleration_m_s2 <= 0:
+        if not (self.max_velocity_m_s > 0 and self.max_acceleration_m_s2 > 0):  # also refuses NaN
             raise ValueError("actuator limits: velocity and acceleration must be > 0")
+        if not all(math.isfinite(x) for x in (self.stroke_min_m, self.stroke_max_m, self.max_velocity_m_s,
+                                              self.max_acceleration_m_s2)):
+            raise ValueError("actuator limits: every limit must be a finite number")
 
 
 class Limiter:
-    """Turns wanted heights into feasible ones; counts the samples it had to change."""
+    """Turns wanted heights into feasible ones; counts the samples it had to change. A NaN start is 0 m
+    (within the stroke), a NaN wanted height keeps the current one: NaN never enters the state."""
 
     def __init__(self, limits: ActuatorLimits, dt_s: float, z0: float = 0.0):
         self.lim = limits
         self.dt = dt_s
-        self.z = min(max(z0, limits.stroke_min_m), limits.stroke_max_m)
+        self.z = min(max(z0 if not math.isnan(z0) else 0.0, limits.stroke_min_m), limits.stroke_max_m)
         self.v = 0.0
         self.limited = 0
 
     def __call__(self, wanted: float) -> tuple[float, float]:
         lim, dt = self.lim, self.dt
+        not_a_number = math.isnan(wanted)
+        if not_a_number:  # min/max would pass NaN on and keep it as the state
+            wanted = self.z
         target = min(max(wanted, lim.stroke_min_m), lim.stroke_max_m)
         v = (target - self.z) / dt
         dv = lim.max_acceleration_m_s2 * dt
@@ -48,7 +57,7 @@ class Limiter:
         v = max(v, min(-brake(self.z + v * dt - lim.stroke_min_m), self.v + dv))
         z = min(max(self.z + v * dt, lim.stroke_min_m), lim.stroke_max_m)  # a safety net only
         v = (z - self.z) / dt
-        if abs(z - wanted) > 1e-12:
+        if not_a_number or abs(z - wanted) > 1e-12:
             self.limited += 1
         self.z, self.v = z, v
         return z, v
