@@ -13,6 +13,7 @@ import io
 import json
 import shutil
 import tempfile
+import uuid
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -30,7 +31,7 @@ from . import loader
 from .operators import case_operators
 from .system import FMU_NAMES, loop_latency_steps
 
-BUILDER_VERSION = "13"
+BUILDER_VERSION = "14"
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}
@@ -154,13 +155,17 @@ def _declare_behaviour(root: ET.Element, experiment: tuple[float, float]) -> Non
         ET.SubElement(initial, "Unknown", {"index": unknown.get("index")})
 
 
-def decorate_model_description(xml_bytes: bytes, variables, experiment: tuple[float, float]) -> bytes:
+def decorate_model_description(xml_bytes: bytes, variables, experiment: tuple[float, float], identity: str) -> bytes:
     """Add unit and display-unit definitions, units, ranges and the generation tool to pythonfmu's
     modelDescription.xml; state the fixed step, the default experiment (step, stop time), the state
     capabilities and the output dependencies (FMI 2.0 sec. 2.2.8: no output depends directly on an
-    input: every output is computed in doStep or read from the state it leaves)."""
+    input: every output is computed in doStep or read from the state it leaves). The GUID is derived
+    from `identity` (the digest of the build's inputs) and the build time is left out, so that the same
+    inputs give the same FMU, byte for byte."""
     root = ET.fromstring(xml_bytes)
     root.set("generationTool", f"pantohil {_version()} with {root.get('generationTool')}")
+    root.set("guid", str(uuid.uuid5(uuid.NAMESPACE_URL, f"pantohil-fmu:{identity}")))
+    root.attrib.pop("generationDateAndTime", None)
     _declare_behaviour(root, experiment)
     by_name = {v.name: v for v in variables}
     used = sorted({v.unit for v in variables if v.kind == "real"})
@@ -218,14 +223,25 @@ def _documentation(name: str, variables, description: str, method: str) -> str:
             "</table></body></html>")
 
 
+ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # every member's time: the zip's bytes depend on its contents only
+
+
 def _rewrite_zip(path: Path, replace: dict[str, bytes]) -> None:
-    buf = io.BytesIO()
-    with zipfile.ZipFile(path) as src, zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as dst:
+    """The FMU with members replaced or added, written reproducibly: members in name order, one fixed
+    time, each keeping its permission bits."""
+    members, modes = {}, {}
+    with zipfile.ZipFile(path) as src:
         for item in src.infolist():
-            if item.filename not in replace:
-                dst.writestr(item, src.read(item.filename))
-        for arcname, data in replace.items():
-            dst.writestr(arcname, data)
+            members[item.filename], modes[item.filename] = src.read(item.filename), item.external_attr
+    members.update(replace)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as dst:
+        for name in sorted(members):
+            info = zipfile.ZipInfo(name, ZIP_TIME)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = modes.get(name, 0o644 << 16)
+            info.create_system = 3  # Unix: the permission bits are in external_attr
+            dst.writestr(info, members[name])
     path.write_bytes(buf.getvalue())
 
 
@@ -276,7 +292,7 @@ def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path
                                                      documentation_folder=doc)
             with zipfile.ZipFile(fmu) as z:
                 xml = z.read("modelDescription.xml")
-            _rewrite_zip(fmu, {"modelDescription.xml": decorate_model_description(xml, variables, experiment),
+            _rewrite_zip(fmu, {"modelDescription.xml": decorate_model_description(xml, variables, experiment, key),
                                **_add_loader(fmu, xml, runtime, Path(tmp))})
             cached.parent.mkdir(parents=True, exist_ok=True)
             with atomic_path(cached) as part:  # no half-written cache entry

@@ -9,15 +9,14 @@ FMU alone (in any master) reproduces the case; a master may still set parameters
 from __future__ import annotations
 
 import copy
-import io
 import json
 import operator
-import pickle
 from dataclasses import dataclass
 from pathlib import Path
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
 
+from pantohil.fmus import state_codec
 from pantohil.models.parameters import AUTO, Key, fmu_keys, fmu_variable_names
 
 PARAMETERS_FILE = "parameters.json"
@@ -121,7 +120,6 @@ def register_all(slave, variables: list[Var]) -> None:
         slave.register_variable(cls(var.name, description=desc, **kw), nested=False)
 
 
-STATE_FORMAT = b"pantohil-fmu-state 1\n"
 # Attributes of every pythonfmu slave that describe the instance, not the simulation
 _INSTANCE_ATTRIBUTES = frozenset({"vars", "log_queue", "instance_name", "resources", "visible", "guid", "author",
                                   "license", "version", "copyright", "modelName", "description",
@@ -130,6 +128,9 @@ _INSTANCE_ATTRIBUTES = frozenset({"vars", "log_queue", "instance_name", "resourc
 
 class StateError(ValueError):
     """A serialized FMU state that this FMU cannot take back."""
+
+
+STATE_FORMAT = state_codec.FORMAT
 
 
 @dataclass
@@ -231,12 +232,7 @@ class PantohilSlave(Fmi2Slave):
     @staticmethod
     def _fmu_state_to_bytes(state: FmuState) -> bytes:
         by_id = {id(obj): name for name, obj in state.constants.items()}
-        buf = io.BytesIO()
-        buf.write(STATE_FORMAT)
-        pickler = pickle.Pickler(buf, protocol=pickle.HIGHEST_PROTOCOL)
-        pickler.persistent_id = lambda obj: by_id.get(id(obj))
-        pickler.dump((state.owner, state.items))
-        return buf.getvalue()
+        return state_codec.encode({"owner": state.owner, "items": state.items}, by_id)
 
     @staticmethod
     def _fmu_state_from_bytes(data: bytes) -> SerializedFmuState:
@@ -246,17 +242,17 @@ class PantohilSlave(Fmi2Slave):
         return SerializedFmuState(data)
 
     def _resolve(self, state: SerializedFmuState) -> FmuState:
+        """A serialized state as data (fmus/state_codec.py: nothing in it is executed), checked to be this
+        FMU's."""
         constants = self.constants()
-
-        def constant(name):
-            if name not in constants:
-                raise StateError(f"{type(self).__name__}: the state refers to {name!r}, which this instance lacks "
-                                 "(initialise it with the same case before setting the state)")
-            return constants[name]
-
-        unpickler = pickle.Unpickler(io.BytesIO(state.data[len(STATE_FORMAT):]))
-        unpickler.persistent_load = constant
-        owner, items = unpickler.load()
-        if owner != type(self).__name__:
+        try:
+            tree = state_codec.decode(state.data, constants)
+        except state_codec.StateDataError as exc:
+            raise StateError(f"{type(self).__name__}: {exc}") from None
+        owner, items = (tree.get("owner"), tree.get("items")) if isinstance(tree, dict) else (None, None)
+        if owner != type(self).__name__ or not isinstance(items, dict):
             raise StateError(f"{type(self).__name__}: the state is of a {owner} FMU")
+        unknown = [k for k in items if not isinstance(k, str) or k in _INSTANCE_ATTRIBUTES]
+        if unknown:
+            raise StateError(f"{type(self).__name__}: the state sets {unknown[0]!r}, which is not simulation state")
         return FmuState(owner, items, constants)
