@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from pantohil.models.case import Case, CaseError
 from pantohil.models.catenary.fe.definition import load_definition
-from pantohil.models.metrics import LOWPASS_CUTOFF_HZ, lowpass, lowpass_periodic
+from pantohil.models.metrics import LOWPASS_CUTOFF_HZ, force_statistics, lowpass, lowpass_periodic
 
 from . import report
 from .recorder import McapRecorder
@@ -27,13 +27,6 @@ def central_spans(n_spans: int, central: int) -> list[int]:
                         f"each side (need at least {central + 4})")
     first = (n_spans - central) // 2
     return list(range(first, first + central))
-
-
-def force_statistics(f: np.ndarray) -> dict:
-    """Mean, std, max, min and mean +- 3 std of a contact force [N]."""
-    mean, std = float(np.mean(f)), float(np.std(f))
-    return {"mean_N": mean, "std_N": std, "stat_max_N": mean + 3 * std, "stat_min_N": mean - 3 * std,
-            "max_N": float(np.max(f)), "min_N": float(np.min(f))}
 
 
 def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progress: bool = True) -> dict:
@@ -81,7 +74,7 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
         "catenary_file": str(path), "catenary_label": _label(cat), "n_spans": n_spans, "central_spans": spans,
         "speed_kmh": case.speed_kmh, "dt_s": dt, "samples_per_span": n, "droppers_slacken": slacken,
         "contact_force": {**force_statistics(filtered[sel]), "filter": f"zero-phase {CUTOFF_HZ:g} Hz low-pass",
-                          "contact_loss_pct": float(100 * np.mean(res.force_N[sel] <= 0.0)),
+                          "contact_loss_pct": force_statistics(res.force_N[sel])["contact_loss_pct"],
                           "raw": force_statistics(res.force_N[sel])},
         "max_support_uplift_m": float(np.max(res.support_uplift_m[sel][:, central_supports])),
         "droppers": {"slack_steps": [int(c) for c in np.count_nonzero(corr_mid > 0, axis=0)],
@@ -150,7 +143,7 @@ def span_force(run: Path) -> tuple[np.ndarray, float, str]:
     if (run / STEADY_SPAN).exists():
         d = read_table(run, STEADY_SPAN)
         dt = float(s["dt_s"])
-        return lowpass_periodic(d[:, -1], dt, CUTOFF_HZ), dt, f"HIL {s['catenary']['model']} ({s['case']})"
+        return lowpass_periodic(d[:, 3], dt, CUTOFF_HZ), dt, f"HIL {s['catenary']['model']} ({s['case']})"
     raise CaseError(f"{run}: neither steady_span.csv nor central_spans.csv")
 
 

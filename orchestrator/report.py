@@ -48,27 +48,36 @@ def write_json_atomic(path: Path, data: dict) -> None:
     write_text_atomic(path, json.dumps(_clean(data), indent=2) + "\n")
 
 
-def write_steady_span(path: Path, t: np.ndarray, z0: np.ndarray, z: np.ndarray, f: np.ndarray) -> None:
-    """Write steady_span.csv (`t_s,z0_m,z_m,f_N` over the converged span), atomically."""
-    rows = "\n".join(f"{a:.6f},{b:.12e},{c:.12e},{d:.12e}" for a, b, c, d in zip(t, z0, z, f, strict=False))
-    write_text_atomic(path, "t_s,z0_m,z_m,f_N\n" + rows + "\n")
+def write_steady_span(path: Path, t: np.ndarray, z0: np.ndarray, z: np.ndarray, f: np.ndarray,
+                      speed_m_s: float) -> None:
+    """Write steady_span.csv (`t_s,z0_m,z_m,f_N,x_m` over the converged span: x_m is the pantograph's
+    position in the span, v t), atomically."""
+    rows = "\n".join(f"{a:.6f},{b:.12e},{c:.12e},{d:.12e},{a * speed_m_s:.6f}"
+                     for a, b, c, d in zip(t, z0, z, f, strict=True))
+    write_text_atomic(path, "t_s,z0_m,z_m,f_N,x_m\n" + rows + "\n")
 
 
 def plot_contact_force(path: Path, dt: float, spans: list[np.ndarray], reference: np.ndarray | None,
-                       filtered: np.ndarray | None, title: str) -> None:
-    """Last spans overlaid (Paper B Fig. 11 style), with the closed form where there is one."""
+                       filtered: np.ndarray | None, title: str, speed_m_s: float) -> None:
+    """Last spans overlaid over the pantograph's position in the span (Paper B Fig. 11 style; time on the
+    top axis), with the closed form where there is one, drawn about the run's mean: the summary's error
+    is taken without the means, and a tared load cell (a rigid mass) measures no static force."""
     fig, ax = plt.subplots(figsize=(9, 4.5))
+    x = np.arange(len(spans[-1])) * dt * speed_m_s
     for i, f in enumerate(spans):
-        ax.plot(np.arange(len(f)) * dt, f, color="0.2", lw=0.8, alpha=0.35 + 0.65 * (i + 1) / len(spans),
+        ax.plot(x, f, color="0.2", lw=0.8, alpha=0.35 + 0.65 * (i + 1) / len(spans),
                 label=f"HIL, last {len(spans)} spans" if i == len(spans) - 1 else None)
     if filtered is not None:
-        ax.plot(np.arange(len(filtered)) * dt, filtered, color="tab:blue", lw=1.2, label="last span, 20 Hz low-pass")
+        ax.plot(x, filtered, color="tab:blue", lw=1.2, label="last span, 20 Hz low-pass")
     if reference is not None:
-        ax.plot(np.arange(len(reference)) * dt, reference, "--", color="tab:red", lw=1.2,
-                label="closed form (same harmonics)")
-    ax.set_xlabel("time in span [s]")
+        shift = float(np.mean(spans[-1]) - np.mean(reference))
+        moved = f", moved {shift:+.1f} N to the run's mean" if abs(shift) > 0.01 * np.std(reference) else ""
+        ax.plot(x, reference + shift, "--", color="tab:red", lw=1.2, label=f"closed form (same harmonics){moved}")
+    ax.set_xlabel("pantograph position in the span [m]")
     ax.set_ylabel("contact force [N]")
-    ax.set_title(title)
+    top = ax.secondary_xaxis("top", functions=(lambda p: p / speed_m_s, lambda t: t * speed_m_s))
+    top.set_xlabel("time in span [s]")
+    ax.set_title(title, pad=10)
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     save_figure(fig, path)

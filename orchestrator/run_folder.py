@@ -19,7 +19,7 @@ from pantohil.models.case import CaseError
 
 LOCK_NAME = ".pantohil-run.lock"
 SUMMARY = "summary.json"
-STEADY_SPAN = "steady_span.csv"  # t_s, z0_m, z_m, f_N of the converged span (HIL runs)
+STEADY_SPAN = "steady_span.csv"  # t_s, z0_m, z_m, f_N, x_m of the converged span (HIL runs)
 CENTRAL_SPANS = "central_spans.csv"  # span, t_s, f_N, f_lowpass_N of a fem-sim section
 RUNS_ROOT = Path("runs")
 

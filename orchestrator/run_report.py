@@ -40,8 +40,13 @@ def _hil_summary(case: Case, plan: dict) -> dict:
             "ramp_steps": case.ramp_steps, "delay_compensation": case.delay_compensation, **plan}
 
 
-def _statistics(f: np.ndarray, filtered: np.ndarray) -> ForceStatistics:
-    return ForceStatistics(**force_statistics(f), filtered_20hz=ForceStatistics(**force_statistics(filtered)))
+def _statistics(f: np.ndarray, filtered: np.ndarray, contact: bool) -> ForceStatistics:
+    """EN 50367's statistics, raw and at 20 Hz; no contact-loss share for a rigid mass (bolted to the
+    actuator: its force is its inertia, and below zero it still touches)."""
+    raw, low = force_statistics(f), force_statistics(filtered)
+    if not contact:
+        raw["contact_loss_pct"] = low["contact_loss_pct"] = None
+    return ForceStatistics(**raw, filtered_20hz=ForceStatistics(**low))
 
 
 def _reference(case: Case, f: np.ndarray):
@@ -60,10 +65,11 @@ def _rig_summary(case: Case) -> dict:
     if case.rig_spec is None:
         return asdict(case.rig)
     from pantohil.models.rig.drive_chain import group_delay_s
+    from pantohil.models.rig.rig_file import rig_sections
 
     r = case.values["rig"]
     return {"file": str((case.source.parent / r["file"]).resolve()), "name": case.rig_spec.name,
-            "chain": asdict(case.rig_spec), "group_delay_s": group_delay_s(case.rig_spec, case.dt_s),
+            "chain": rig_sections(case.rig_spec), "group_delay_s": group_delay_s(case.rig_spec, case.dt_s),
             "force_offset_N": r["force_offset_N"], "noise_std_N": r["noise_std_N"], "noise_seed": r["noise_seed"]}
 
 
@@ -93,9 +99,9 @@ def _last_span(state, spans_done: int, plots) -> dict:
         raise RuntimeError("catenary sample labels out of step with the master")
     report.write_steady_span(out_dir / "steady_span.csv", np.arange(n) * dt,
                              master.column("catenary", "profile_at_sample", start, stop),
-                             master.column("catenary", "height_at_sample", start, stop), f)
+                             master.column("catenary", "height_at_sample", start, stop), f, case.speed_m_s)
     filtered = lowpass_periodic(f, dt, FILTER_HZ)
-    out = {"contact_force": _statistics(f, filtered)}
+    out = {"contact_force": _statistics(f, filtered, case.pantograph.model != "rigid_mass")}
     ref = None
     if case.model == "asm":
         ref, out["reference"] = _reference(case, f)
@@ -105,7 +111,8 @@ def _last_span(state, spans_done: int, plots) -> dict:
         overlay = [master.column("catenary", "force_at_sample", s * n, (s + 1) * n)
                    for s in range(max(0, spans_done - 10), spans_done)]
         report.plot_contact_force(out_dir / "contact_force.png", dt, overlay, ref, filtered,
-                                  f"{case.name}: {case.speed_kmh:.0f} km/h, {state.status} after {spans_done} spans")
+                                  f"{case.name}: {case.speed_kmh:.0f} km/h, {state.status} after {spans_done} spans",
+                                  case.speed_m_s)
     return out
 
 

@@ -25,18 +25,24 @@ class ForceStatistics:
     std_N: float
     max_N: float
     min_N: float
+    stat_max_N: float | None = None  # EN 50367: mean + 3 std
+    stat_min_N: float | None = None  # mean - 3 std
+    contact_loss_pct: float | None = None  # share of samples with no contact (force <= 0) [%]
     filtered_20hz: ForceStatistics | None = None
 
     @classmethod
     def from_dict(cls, d: dict) -> ForceStatistics:
-        """The statistics as read from summary.json."""
+        """The statistics as read from summary.json (a summary written before the EN 50367 figures has none)."""
         inner = d.get("filtered_20hz")
-        return cls(d["mean_N"], d["std_N"], d["max_N"], d["min_N"],
-                   cls.from_dict(inner) if inner is not None else None)
+        return cls(d["mean_N"], d["std_N"], d["max_N"], d["min_N"], d.get("stat_max_N"), d.get("stat_min_N"),
+                   d.get("contact_loss_pct"), cls.from_dict(inner) if inner is not None else None)
 
     def to_dict(self) -> dict:
         """The statistics as written to summary.json (with `filtered_20hz` if present)."""
         out = {"mean_N": self.mean_N, "std_N": self.std_N, "max_N": self.max_N, "min_N": self.min_N}
+        for name in ("stat_max_N", "stat_min_N", "contact_loss_pct"):
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name)
         if self.filtered_20hz is not None:
             out["filtered_20hz"] = self.filtered_20hz.to_dict()
         return out

@@ -180,8 +180,9 @@ def _toml_value(v) -> str:
     return repr(v)
 
 
-def rig_to_toml(spec: RigSpec, header: str = "") -> str:
-    """The rig file of `spec` (with its measured response, if any)."""
+def rig_sections(spec: RigSpec) -> dict:
+    """The rig file's sections of `spec` as plain data (its measured response, if any, as gains and
+    phases in degrees): what rig_to_toml writes and a run's summary.json reports."""
     lim = spec.limits
     sections = {
         "rig": {"name": spec.name, "description": spec.description, "model_step_s": spec.model_step_s,
@@ -198,8 +199,13 @@ def rig_to_toml(spec: RigSpec, header: str = "") -> str:
             "force_gain": [abs(g) for g in m.force],
             "force_phase_deg": [math.degrees(cmath.phase(g)) for g in m.force],
         }
+    return sections
+
+
+def rig_to_toml(spec: RigSpec, header: str = "") -> str:
+    """The rig file of `spec` (with its measured response, if any)."""
     lines = [f"# {line}" for line in header.splitlines()]
-    for name, keys in sections.items():
+    for name, keys in rig_sections(spec).items():
         lines += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in keys.items()]
     return "\n".join(lines).lstrip("\n") + "\n"
 

@@ -81,7 +81,7 @@ def main() -> None:
             c = load_case(case_file, extra)
             s = run_case(c, Path(tmp) / name.split()[0], progress=False)
             span = np.loadtxt(Path(tmp) / name.split()[0] / "steady_span.csv", delimiter=",", skiprows=1)
-            runs[name] = (s, span[:, -1])
+            runs[name] = (s, span[:, 3])
             print(f"{name:<24s} {s.status} after {s.spans} spans, std {s.contact_force.std_N:.2f} N, "
                   f"catenary set+doStep+get median {s.timing.per_step_us['catenary']:.1f} us")
         plot_force_comparison(args.out / "pfem_linear_vs_nonlinear.png", case.dt_s,

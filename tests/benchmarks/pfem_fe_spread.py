@@ -43,7 +43,7 @@ def force_spread(run: Path, fe: dict, spans: range) -> None:
     from pantohil.models.metrics import lowpass, lowpass_periodic
 
     n, dt = int(fe["n"]), float(fe["dt"])
-    fp = lowpass_periodic(np.loadtxt(run / "steady_span.csv", delimiter=",", skiprows=1)[:, -1], dt, CUTOFF_HZ)
+    fp = lowpass_periodic(np.loadtxt(run / "steady_span.csv", delimiter=",", skiprows=1)[:, 3], dt, CUTOFF_HZ)
     ff = lowpass(fe["force"], dt, CUTOFF_HZ)
     blocks = np.stack([ff[j * n - 1:(j + 1) * n - 1] for j in spans])
     first = (len(fe["force"]) // n - 3) // 2  # fem-sim's 3 central spans

@@ -1,0 +1,48 @@
+"""What an engineer reads in a run folder: EN 50367's statistics in summary.json (the same definition
+for HIL runs and fem-sim), the pantograph's position in steady_span.csv, and a run on a rig file
+written by `pantohil rig-identify` (its complex response) summarised without error."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import CASES_DIR, ROOT, load_run, pantohil
+from pantohil.models.metrics import lowpass_periodic
+
+
+def test_en50367_statistics_and_position_of_a_run(tmp_path):
+    out = tmp_path / "run"
+    proc = pantohil("run", "--engine", "inprocess", "--out", str(out), "--quiet", "--no-plots")
+    assert proc.returncode == 0, proc.stderr
+    summary, span = load_run(out)
+    t, f, x = span[:, 0], span[:, 3], span[:, 4]
+    speed = summary["speed_kmh"] / 3.6
+    assert np.allclose(x, speed * t, atol=1e-6) and x[0] == 0.0
+    cf = summary["contact_force"]
+    # an independent computation from the CSV's 13 digits
+    assert cf["std_N"] == pytest.approx(np.std(f), rel=1e-9) and cf["max_N"] == pytest.approx(f.max(), rel=1e-9)
+    assert cf["stat_max_N"] == pytest.approx(cf["mean_N"] + 3 * cf["std_N"], rel=1e-12)
+    assert cf["stat_min_N"] == pytest.approx(cf["mean_N"] - 3 * cf["std_N"], rel=1e-12)
+    assert cf["contact_loss_pct"] == 0.0 and f.min() > 0
+    low = lowpass_periodic(f, summary["dt_s"], 20.0)
+    assert cf["filtered_20hz"]["std_N"] == pytest.approx(np.std(low), rel=1e-9)
+    assert cf["filtered_20hz"]["stat_min_N"] == pytest.approx(np.mean(low) - 3 * np.std(low), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_a_run_on_an_identified_rig_file_writes_its_summary(tmp_path):
+    rig = tmp_path / "identified.toml"
+    case = CASES_DIR / "paper_b_mass_300.toml"
+    proc = pantohil("rig-identify", "--rig", str(ROOT / "models" / "data" / "rigs" / "paper_b.toml"),
+                    "--case", str(case), "--out", str(rig))
+    assert proc.returncode == 0, proc.stderr
+    out = tmp_path / "run"
+    proc = pantohil("run", str(case), "--set", f'rig.file="{rig}"', "--set", "run.max_spans=4", "--engine",
+                    "inprocess", "--out", str(out), "--quiet", "--no-plots")
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr  # 4 spans: not yet converged
+    summary = json.loads((out / "summary.json").read_text())
+    response = summary["rig"]["chain"]["response"]
+    assert len(response["frequencies_hz"]) == len(response["height_gain"]) == len(response["force_phase_deg"]) > 1
+    assert "contact_loss_pct" not in summary["contact_force"]  # a rigid mass on the actuator: not defined
