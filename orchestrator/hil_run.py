@@ -518,7 +518,9 @@ def step_span(state: RunState, span: int) -> tuple[str, str] | None:
     duration_spans = -(-round(run["duration_s"] / dt) // n)
     if duration_spans and span + 1 >= duration_spans:
         return (("converged", f"converged; ran {span + 1} spans (run.duration_s)") if settled else
-                ("span_limit", f"not converged after run.duration_s = {run['duration_s']:g} s"))
+                ("completed", f"completed the planned run.duration_s = {run['duration_s']:g} s ({span + 1} spans); "
+                              f"not converged: the last span's change {rec['change']:.3g} is above "
+                              f"run.convergence_tol = {run['convergence_tol']:g}"))
     if settled and not duration_spans:
         return "converged", f"converged after {span + 1} spans"
     median = state.monitor.diverging(run["divergence_spans"], run["divergence_change"], -(-case.ramp_steps // n) + 1)

@@ -14,7 +14,7 @@ EXIT_CONVERGED = 0
 EXIT_NOT_CONVERGED = 1
 EXIT_LINK_LOST = 3
 
-STATUSES = ("converged", "diverged", "span_limit", "contact_lost", "link_lost", "interrupted")
+STATUSES = ("converged", "completed", "diverged", "span_limit", "contact_lost", "link_lost", "interrupted")
 
 
 @dataclass(frozen=True)
@@ -104,12 +104,13 @@ class RunSummary:
 
     @property
     def exit_code(self) -> int:
-        """0 converged; 1 diverged, span limit or contact lost; 3 link lost; 128 + the signal if interrupted."""
+        """0 converged, or completed its planned run.duration_s; 1 diverged, span limit or contact lost; 3 link
+        lost; 128 + the signal if interrupted."""
         if self.status == "interrupted":
             return 128 + int(getattr(signal, self.stop_signal or "SIGINT"))
         if self.status == "link_lost":
             return EXIT_LINK_LOST
-        return EXIT_CONVERGED if self.converged else EXIT_NOT_CONVERGED
+        return EXIT_CONVERGED if self.status in ("converged", "completed") else EXIT_NOT_CONVERGED
 
     def to_dict(self) -> dict:
         """The summary as written to summary.json (fields that are None left out)."""

@@ -51,7 +51,7 @@ KINDS = ("run", "direct")
 DIRECT_KEYS = ("direct.second_pantograph_m",)
 STATS = ("status", "converged", "diverged", "spans", "mean_N", "std_N", "std_20hz_N", "max_N", "min_N",
          "trailing_std_N", "trailing_std_20hz_N", "wall_s", "finished_utc", "message")
-DONE = ("converged", "span_limit", "diverged", "ok")
+DONE = ("converged", "completed", "span_limit", "diverged", "ok")
 MAX_POINTS = 10_000  # points of a sweep, all grid keys together
 
 

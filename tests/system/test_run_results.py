@@ -46,3 +46,13 @@ def test_a_run_on_an_identified_rig_file_writes_its_summary(tmp_path):
     response = summary["rig"]["chain"]["response"]
     assert len(response["frequencies_hz"]) == len(response["height_gain"]) == len(response["force_phase_deg"]) > 1
     assert "contact_loss_pct" not in summary["contact_force"]  # a rigid mass on the actuator: not defined
+
+
+def test_a_fixed_length_test_that_ran_its_duration_is_completed(tmp_path):
+    out = tmp_path / "fixed"
+    proc = pantohil("run", "--engine", "inprocess", "--out", str(out), "--quiet", "--no-plots",
+                    "--set", "run.duration_s=2.8", "--set", "run.max_spans=5")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and not summary["converged"] and summary["spans"] == 3
+    assert "completed the planned run.duration_s = 2.8 s" in proc.stdout and "not converged" in proc.stdout
