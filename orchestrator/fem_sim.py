@@ -165,6 +165,10 @@ def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
     """`pantohil compare`: the 20 Hz contact force of two run folders, their stds and RMS difference."""
     fa, dta, la = span_force(a)
     fb, dtb, lb = span_force(b)
+    if la == lb:  # two runs of one case: their folders tell them apart
+        la, lb = f"{la}, {Path(a).name}", f"{lb}, {Path(b).name}"
+        if la == lb:
+            la, lb = f"{la} (first)", f"{lb} (second)"
     if len(fa) != len(fb) or abs(dta - dtb) > 1e-12:
         raise CaseError(f"compare: the runs are on different grids ({len(fa)} samples of {dta:g} s, "
                         f"{len(fb)} of {dtb:g} s)")

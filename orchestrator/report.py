@@ -121,11 +121,16 @@ def plot_dropper_corrections(path: Path, dt: float, corrections: np.ndarray, tit
 
 
 def plot_force_comparison(path: Path, dt: float, forces: dict, title: str) -> None:
-    """Contact force over one span of several runs, overlaid."""
-    fig, ax = plt.subplots(figsize=(9, 4.5))
+    """Contact force over one span of two runs, overlaid, and below it their difference (first - second)."""
+    fig, (ax, below) = plt.subplots(2, 1, figsize=(9, 6), sharex=True, height_ratios=(3, 1.4))
     for label, f in forces.items():
         ax.plot(np.arange(len(f)) * dt, f, lw=1.1, label=label)
-    ax.set_xlabel("time in span [s]")
+    (la, fa), (lb, fb) = list(forces.items())[:2]
+    below.plot(np.arange(len(fa)) * dt, fa - fb, lw=1.0, color="tab:red")
+    below.set_ylabel("difference [N]")
+    below.set_title(f"{la} minus {lb}", fontsize=8)
+    below.set_xlabel("time in span [s]")
+    below.grid(alpha=0.3)
     ax.set_ylabel("contact force [N]")
     ax.set_title(title)
     ax.grid(alpha=0.3)

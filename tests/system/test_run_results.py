@@ -56,3 +56,16 @@ def test_a_fixed_length_test_that_ran_its_duration_is_completed(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "completed" and not summary["converged"] and summary["spans"] == 3
     assert "completed the planned run.duration_s = 2.8 s" in proc.stdout and "not converged" in proc.stdout
+
+
+@pytest.mark.slow
+def test_compare_of_two_runs_of_one_case_keeps_both(tmp_path):
+    # the README's tour: the default run and a span-by-span one of the same case
+    for name, extra in (("default", ()), ("span", ("--set", "hil.update=span", "--set", "hil.max_frequency_hz=10"))):
+        proc = pantohil("run", "--engine", "inprocess", "--out", str(tmp_path / name), "--quiet", "--no-plots", *extra)
+        assert proc.returncode == 0, proc.stderr
+    proc = pantohil("compare", str(tmp_path / "default"), str(tmp_path / "span"), "--out", str(tmp_path / "cmp"))
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads((tmp_path / "cmp" / "compare.json").read_text())
+    assert res["a"]["label"] != res["b"]["label"] and res["a"]["label"].endswith("default")
+    assert res["rms_difference_N"] > 0 and (tmp_path / "cmp" / "contact_force.png").stat().st_size > 10_000
