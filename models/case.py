@@ -18,7 +18,7 @@ import numpy as np
 from pantohil.models.catenary.asm.string import AsmParameters, receptance_direct
 from pantohil.models.catenary.profile import DropperProfile, ProfileError, TabulatedProfile, read_profile_csv
 from pantohil.models.catenary.receptance import harmonic_count
-from pantohil.models.data import CASES_DIR
+from pantohil.models.data import CASES_DIR, catalog
 from pantohil.models.hil.loop import HilSettings
 from pantohil.models.input_files import InputFileError, load_toml
 from pantohil.models.pantograph.lumped import PantographParameters
@@ -55,11 +55,13 @@ _SET_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 def load_case_dict(path: Path | None) -> tuple[dict, Path]:
     """Read a case file (the built-in asm_250 if none) as a dict; CaseError with one line on a bad file."""
-    path = Path(path) if path is not None else DEFAULT_CASE
+    path = catalog.resolve(path, "case") if path is not None else DEFAULT_CASE
     try:
         return load_toml(path, "case file"), path
     except InputFileError as exc:
-        raise CaseError(str(exc)) from None
+        bare = not path.exists() and len(path.parts) == 1
+        hint = " (nor a shipped case: `pantohil cases` lists them)" if bare else ""
+        raise CaseError(f"{exc}{hint}") from None
 
 
 def apply_overrides(raw: dict, overrides: list[str]) -> dict:

@@ -19,6 +19,7 @@ from pathlib import Path
 from pantohil.models.case import CaseError, load_case
 from pantohil.models.catenary.fe.definition import CatenaryError
 from pantohil.models.catenary.profile import ProfileError
+from pantohil.models.data import catalog
 from pantohil.models.input_files import InputFileError
 
 EXIT_BAD_INPUT = 2
@@ -269,6 +270,16 @@ def _add_sweep_command(sub) -> None:
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _add_cases_command(sub) -> None:
+    sub.add_parser("cases", help="list the shipped cases, catenaries, rigs and sweeps, which every command takes "
+                                 "by name (pantohil run pfem_benchmark_250)")
+
+
+def _cmd_cases(args) -> int:
+    print(catalog.listing())
+    return 0
+
+
 def _add_example_command(sub) -> None:
     """`pantohil example` and its options."""
     example = sub.add_parser("example", help="reproduce a worked example of the thesis")
@@ -303,6 +314,7 @@ COMMANDS = (  # the order of `pantohil --help`
     _add_sweep_command,
     _add_example_command,
     _add_direct_command,
+    _add_cases_command,
 )
 
 
@@ -476,7 +488,7 @@ def _rig_file_arg(path: Path | None, option: str = "--rig"):
     from pantohil.models.rig.rig_file import RigFileError, load_rig_file
 
     try:
-        return load_rig_file(path)
+        return load_rig_file(catalog.resolve(path, "rig"))
     except RigFileError as exc:
         raise CaseError(f"{option}: {exc}") from None
 
@@ -569,7 +581,7 @@ def _cmd_catenary(args) -> int:
     from pantohil.orchestrator.catenary_report import catenary_report
 
     try:
-        s = catenary_report(args.file, args.out)
+        s = catenary_report(catalog.resolve(args.file, "catenary"), args.out)
     except CatenaryError as exc:
         raise CaseError(str(exc)) from None
     fit = s["asm_fit"]
@@ -680,8 +692,8 @@ def _cmd_sweep(args) -> int:
     from pantohil.orchestrator.sweep import run_sweep
 
     try:
-        s = run_sweep(args.file, args.out, args.scheduler, args.workers, progress=not args.quiet,
-                      engine=args.engine, point_plots=True if args.point_plots else None)
+        s = run_sweep(catalog.resolve(args.file, "sweep"), args.out, args.scheduler, args.workers,
+                      progress=not args.quiet, engine=args.engine, point_plots=True if args.point_plots else None)
     except KeyboardInterrupt:
         print(f"interrupted: the points done so far are in {args.out / 'results.csv'}; run the same command again "
               "to run the others", file=sys.stderr)
@@ -724,7 +736,7 @@ def main(argv: list[str] | None = None) -> int:
     handler = {"build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
                "rig-emulator": _cmd_emulator, "rig-identify": _cmd_identify, "catenary": _cmd_catenary,
                "example": _cmd_example, "fem-sim": _cmd_fem_sim, "compare": _cmd_compare, "stability": _cmd_stability,
-               "sweep": _cmd_sweep, "watch": _cmd_watch}[args.command]
+               "sweep": _cmd_sweep, "watch": _cmd_watch, "cases": _cmd_cases}[args.command]
     return _guarded(handler, args)
 
 

@@ -25,6 +25,29 @@ def pantohil(*args: str, cwd: Path | None = None, timeout: float = 600) -> subpr
                           capture_output=True, text=True, timeout=timeout)
 
 
+def plain_install(venv: Path) -> Path:
+    """A new virtual environment at `venv` with a plain (not editable) `pip install --no-deps` of this tree;
+    its Python. The dependencies are lent by the environment running the tests (its site-packages
+    folders, named in a .pth file, whose own .pth files are not run: an editable install of pantohil there
+    stays out), whether that is the machine's Python or a virtual environment of its own."""
+    import site
+    import sysconfig
+
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+    python = venv / "bin" / "python"
+    purelib = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                             capture_output=True, text=True, check=True).stdout.strip()
+    lent = [*site.getsitepackages(), sysconfig.get_path("purelib"), sysconfig.get_path("platlib")]
+    if site.ENABLE_USER_SITE:
+        lent.append(site.getusersitepackages())
+    lent = [p for p in dict.fromkeys(lent) if Path(p).is_dir() and Path(p) != Path(purelib)]
+    (Path(purelib) / "_pantohil_test_dependencies.pth").write_text("\n".join(lent) + "\n")
+    proc = subprocess.run([str(python), "-m", "pip", "install", "-q", "--no-deps", str(ROOT)],
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return python
+
+
 def default_sigint() -> None:
     """`preexec_fn` of a child the test will Ctrl-C: SIGINT's default disposition, as a terminal gives it, also
     when the suite itself runs with SIGINT ignored (a background job of a shell without job control)."""

@@ -7,10 +7,9 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 
 import pytest
-from conftest import CASES_DIR, CATENARIES_DIR, ROOT
+from conftest import CASES_DIR, CATENARIES_DIR, ROOT, plain_install
 
 CASES = sorted(p.name for p in CASES_DIR.glob("*.toml"))
 CATENARIES = sorted(p.name for p in CATENARIES_DIR.glob("*.toml"))
@@ -20,12 +19,7 @@ SPANS = 3
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
     """The `pantohil` command of a fresh venv holding a non-editable install of this tree."""
-    venv = tmp_path_factory.mktemp("install") / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True)
-    proc = subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "-q", "--no-deps", str(ROOT)],
-                          capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return venv / "bin" / "pantohil"
+    return plain_install(tmp_path_factory.mktemp("install") / "venv").parent / "pantohil"
 
 
 def _run(cmd, cwd):
@@ -64,3 +58,28 @@ def test_every_shipped_catenary_file_builds_from_another_folder(installed, tmp_p
     proc = _run([installed, "catenary", path, "--out", tmp_path / "cat"], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert (tmp_path / "cat" / "catenary.json").exists()
+
+
+@pytest.mark.slow
+def test_shipped_data_by_name_from_an_empty_folder(installed, tmp_path):
+    pantohil = installed
+    listing = _run([pantohil, "cases"], tmp_path)
+    assert listing.returncode == 0 and "pfem_benchmark_250" in listing.stdout and "paper_d" in listing.stdout
+    for kind in ("cases", "catenaries", "rigs", "sweeps"):
+        assert f"\n{kind} (" in "\n" + listing.stdout, listing.stdout
+    run = _run([pantohil, "run", "pfem_benchmark_250", "--out", tmp_path / "run", "--quiet", "--no-plots",
+                "--set", f"run.max_spans={SPANS}"], tmp_path)
+    assert run.returncode in (0, 1) and (tmp_path / "run" / "summary.json").exists(), run.stderr
+    fem = _run([pantohil, "fem-sim", "pfem_benchmark_250", "--spans", "7", "--out", tmp_path / "fem"], tmp_path)
+    assert fem.returncode == 0 and (tmp_path / "fem" / "summary.json").exists(), fem.stderr
+    emu = subprocess.Popen([str(pantohil), "rig-emulator", "--case", "paper_b_mass_300", "--rig", "paper_b",
+                            "--listen", "127.0.0.1:0", "--max-seconds", "60"], cwd=tmp_path, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)
+    try:
+        line = emu.stdout.readline()
+        assert "rig emulator for paper_b_mass_300 with rig paper_b listening on" in line, line + emu.stderr.read()
+    finally:
+        emu.terminate()
+        emu.wait(timeout=60)
+    unknown = _run([pantohil, "run", "no_such_case", "--out", tmp_path / "none"], tmp_path)
+    assert unknown.returncode == 2 and "no_such_case" in unknown.stderr and not (tmp_path / "none").exists()

@@ -8,6 +8,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from conftest import plain_install
 
 ROOT = Path(__file__).resolve().parents[2]
 VERSION = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
@@ -36,12 +37,7 @@ def test_public_api_in_this_install(tmp_path):
 @pytest.mark.slow
 def test_public_api_after_a_plain_pip_install(tmp_path):
     venv = tmp_path / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True)
-    py = venv / "bin" / "python"
-    # --system-site-packages lends the dependencies; pip builds the wheel as a user's pip would
-    proc = subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", str(ROOT)],
-                          capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
+    py = plain_install(venv)
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     proc = subprocess.run([str(py), "-c", CHECK], cwd=elsewhere, capture_output=True, text=True)
