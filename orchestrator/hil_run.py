@@ -246,6 +246,7 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     Without `stop`, SIGINT and SIGTERM are caught for the duration of the run (main thread only)."""
     options = RunOptions(master_kind, system, hardware, realtime, rt_priority, progress, live, live_wait,
                          checkpoint_info, resume, engine, log_writer, plots)
+    _check_master_installed(options.master_kind)
     topology = run_topology(case, options)
     plan = delay_plan(case, topology)  # validates before anything is written
     with (stop_on_signals() if stop is None else nullcontext(stop)) as request:
@@ -264,6 +265,22 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
                 start(state)
                 step_until_done(state)
             return summarise(state)
+
+
+MASTER_PACKAGES = {"libcosim": ("libcosimpy", "libcosim")}  # master -> (module it needs, pantohil's extra)
+
+
+def _check_master_installed(master_kind: str) -> None:
+    """A master whose package is missing: one line naming the extra to install, before anything is written."""
+    import importlib
+
+    if master_kind in MASTER_PACKAGES:
+        module, extra = MASTER_PACKAGES[master_kind]
+        try:
+            importlib.import_module(module)
+        except ImportError:
+            raise CaseError(f"--master {master_kind}: needs {module}, which is not installed "
+                            f"(pip install \"pantohil[{extra}]\")") from None
 
 
 def _saves_checkpoints(options: RunOptions, topology: Topology) -> bool:
