@@ -12,7 +12,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from tqdm import tqdm
+from pantohil.models.progress import progress as progress_bar
 
 from pantohil.models.catenary.fe import definition as catenary_definition
 from pantohil.models.catenary.fe import model as fe_model
@@ -68,7 +68,7 @@ def case_operators(case: Case, progress: bool = True) -> OperatorBuild:
         return OperatorBuild(path, True, time.perf_counter() - t0, int(ops.info.get("n_frequencies", 0)),
                              path.stat().st_size, key)
     cb = periodic_block(load_definition(case.definition_path), case.samples_per_span)
-    with tqdm(total=1, unit="freq", desc="PFEM operators", disable=None if progress else True, leave=False) as bar:
+    with progress_bar(1, "PFEM operators", "freq", progress) as bar:
         def tick(done, total):
             bar.total = total
             bar.n = done

@@ -32,14 +32,31 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
             client.close()
         return
     n = workers or max(1, min(os.cpu_count() or 1, 2))
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                            silence_logs=logging.ERROR)
     client = Client(cluster)
     try:
         yield client
     finally:
-        client.close()
-        cluster.close()
+        with _quiet_teardown():
+            client.close()
+            cluster.close()
+
+
+@contextmanager
+def _quiet_teardown():
+    """While the client and the cluster close, after every result was taken: the connections that the
+    closing workers drop (CommClosedError) are logged by distributed and tornado as errors with a
+    traceback, on a run that succeeded. Only CRITICAL passes while closing."""
+    loggers = [logging.getLogger(name) for name in ("distributed", "tornado", "asyncio")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
 
 
 def tune_worker_allocator() -> None:
@@ -75,18 +92,20 @@ def _as_completed_interruptible(completed, poll_s: float = 0.2):
 
 
 def run_tasks(client, fn: Callable, items: list, keys: Iterable[str], on_result: Callable, progress: bool = True,
-              desc: str = "tasks") -> None:
-    """Submit fn(item) for every item and call on_result(item, result, error) as each finishes.
+              desc: str = "tasks", unit: str = "pt", weight: Callable = lambda item: 1) -> None:
+    """Submit fn(item) for every item and call on_result(item, result, error) as each finishes; the progress
+    counts `weight(item)` units (points) per item.
 
     On Ctrl-C the outstanding tasks are cancelled and the interrupt propagates after the results already
     handed over have been kept by the caller."""
     from distributed import as_completed
-    from tqdm import tqdm
+
+    from pantohil.models.progress import progress as progress_bar
 
     futures = client.map(fn, items, key=list(keys), pure=False)
     item_of = {f.key: item for f, item in zip(futures, items, strict=False)}
     try:
-        with tqdm(total=len(futures), desc=desc, disable=not progress, unit="pt") as bar:
+        with progress_bar(sum(weight(item) for item in items), desc, unit, progress, leave=True) as bar:
             for fut in _as_completed_interruptible(as_completed(futures)):
                 result, error = None, None
                 try:
@@ -94,6 +113,6 @@ def run_tasks(client, fn: Callable, items: list, keys: Iterable[str], on_result:
                 except Exception as exc:  # a failed point is recorded, the others go on
                     error = f"{type(exc).__name__}: {exc}"
                 on_result(item_of[fut.key], result, error)
-                bar.update(1)
+                bar.update(weight(item_of[fut.key]))
     finally:
         client.cancel([f for f in futures if not f.done()])

@@ -35,7 +35,7 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
     summary.json holds the statistics of the central spans after the 20 Hz low-pass; central_spans.csv
     the force on the PFEM run's grid; also dropper corrections, run.mcap and plots.
     """
-    from tqdm import tqdm
+    from pantohil.models.progress import progress as progress_bar
 
     from pantohil.models.catenary.fe.simulation import simulate_section
 
@@ -49,8 +49,7 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
     slacken = case.values["pfem"]["droppers"]
     n, dt = case.samples_per_span, case.dt_s
     out_dir = Path(out_dir)
-    with tqdm(total=1, unit="step", desc=f"fem-sim {n_spans} spans", disable=None if progress else True,
-              leave=False) as bar:
+    with progress_bar(1, f"fem-sim {n_spans} spans", "step", progress) as bar:
         def tick(k, total):
             bar.total = total
             bar.n = k

@@ -33,7 +33,7 @@ from pantohil.builder.system import (
 )
 from pantohil.models.case import Case, CaseError
 from pantohil.models.hil.loop import ConvergenceMonitor
-from tqdm import tqdm
+from pantohil.models.progress import progress
 
 from . import checkpoint
 from .case_reference import case_dropper_positions
@@ -432,8 +432,8 @@ def step_until_done(state: RunState) -> None:
     """Stage 3: span after span until converged, diverged, contact lost, the span limit, or a stop."""
     case = state.case
     hardware = state.prepared.options.hardware
-    state.bar = tqdm(total=case.values["run"]["max_spans"], initial=state.first_span, unit="span", leave=False,
-                     desc=case.name, disable=None if state.prepared.options.progress else True)
+    state.bar = progress(case.values["run"]["max_spans"], case.name, "span", state.prepared.options.progress,
+                         initial=state.first_span)
     t_start, cpu_start = time.perf_counter(), time.process_time()
     try:
         if hardware is not None and state.prepared.options.master_kind == "fmpy":

@@ -202,7 +202,8 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
         n_workers = worker_count(client)
         t_start = time.perf_counter()
         keys = [f"stability-{os.getpid()}-{i}" for i in range(len(tasks))]
-        run_tasks(client, stability_row, tasks, keys, keep, progress, desc="stability map")
+        run_tasks(client, stability_row, tasks, keys, keep, progress, desc="stability map",
+                  weight=lambda task: len(task["contact_stiffness_N_m"]))
         t_map = time.perf_counter() - t_start
     rows.sort(key=lambda r: (r["delay_steps"], r["f_max_hz"], r["contact_stiffness_N_m"]))
     write_csv(out / "stability.csv", rows)

@@ -69,3 +69,11 @@ def test_compare_of_two_runs_of_one_case_keeps_both(tmp_path):
     res = json.loads((tmp_path / "cmp" / "compare.json").read_text())
     assert res["a"]["label"] != res["b"]["label"] and res["a"]["label"].endswith("default")
     assert res["rms_difference_N"] > 0 and (tmp_path / "cmp" / "contact_force.png").stat().st_size > 10_000
+
+
+def test_a_run_logs_its_progress_in_lines(tmp_path):
+    # stderr is a pipe here, as in a log: lines, no carriage returns (a terminal gets a bar)
+    proc = pantohil("run", "--engine", "inprocess", "--out", str(tmp_path / "run"), "--no-plots",
+                    "--set", "run.max_spans=3")
+    assert proc.returncode == 1, proc.stderr
+    assert "\r" not in proc.stderr and "asm_250: 3/3 span (100 %)" in proc.stderr
