@@ -374,7 +374,7 @@ def _print_run(result, out: Path) -> None:
     cf = result.contact_force
     if cf is not None:
         print(f"contact force: mean {cf.mean_N:.2f} N, std {cf.std_N:.2f} N, 20 Hz std {cf.filtered_20hz.std_N:.2f} N; "
-              f"{result.timing.realtime_factor:.1f}x real time")
+              f"{result.timing.realtime_factor:.1f}x real time while stepping (build {result.timing.build_s:.1f} s)")
         lp = cf.filtered_20hz
         print(f"EN 50367, 20 Hz: mean +- 3 std {lp.stat_min_N:.1f} to {lp.stat_max_N:.1f} N, actual {lp.min_N:.1f} to "
               f"{lp.max_N:.1f} N, " + ("no contact loss for a rigid mass" if cf.contact_loss_pct is None
