@@ -200,6 +200,12 @@ class Case:
     definition_path: Path | None = None
     rig_spec: RigSpec | None = None  # the rig file's chain, if the case names one
     rig_compensation: str = "delay"
+    overrides: tuple = ()  # the `section.key=value` overrides given on top of the case file
+
+    @property
+    def title(self) -> str:
+        """The case's name with its overrides, for plot titles: `asm_250 [hil.update=span]`."""
+        return f"{self.name} [{', '.join(self.overrides)}]" if self.overrides else self.name
 
     @property
     def compensates_rig_response(self) -> bool:
@@ -446,4 +452,5 @@ def _check_measured_response(case: Case) -> None:
 def load_case(path: Path | None = None, overrides: list[str] | None = None) -> Case:
     """Load, override (`section.key=value` strings) and validate a case file into a Case."""
     raw, source = load_case_dict(path)
-    return build_case(apply_overrides(raw, overrides or []), source)
+    return dataclasses.replace(build_case(apply_overrides(raw, overrides or []), source),
+                               overrides=tuple(overrides or ()))

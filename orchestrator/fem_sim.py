@@ -115,12 +115,12 @@ def _write_plots(out_dir: Path, case: Case, n_spans: int, dt, cat, res, filtered
                  mid) -> None:
     """Plot the force along the section, the central spans overlaid and the dropper corrections."""
     report.plot_section_force(out_dir / "force_along_section.png", res.x_m, res.force_N, filtered, cat.span_m,
-                              spans, f"{case.name}: {n_spans}-span section, {case.speed_kmh:.0f} km/h")
+                              spans, f"{case.title}: {n_spans}-span section, {case.speed_kmh:.0f} km/h")
     report.plot_force_comparison(out_dir / "central_spans.png", dt,
                                  {f"span {j} ({CUTOFF_HZ:g} Hz)": blk for j, blk in zip(spans, blocks, strict=False)},
-                                 f"{case.name}: central spans overlaid")
+                                 f"{case.title}: central spans overlaid")
     report.plot_dropper_corrections(out_dir / "dropper_corrections.png", dt, corr_mid,
-                                    f"{case.name}: dropper correction forces, span {mid}")
+                                    f"{case.title}: dropper correction forces, span {mid}")
 
 
 def _label(cat) -> str:

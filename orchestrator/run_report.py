@@ -83,7 +83,7 @@ def _droppers(state, start: int, stop: int, plots: bool) -> dict:
                header="t_s," + ",".join(f"dropper_{d + 1}_N" for d in range(len(positions))), comments="", fmt="%.9g")
     if plots:
         report.plot_dropper_corrections(out_dir / "dropper_corrections.png", dt, corr,
-                                        f"{case.name}: dropper correction forces, converged span")
+                                        f"{case.title}: dropper correction forces, converged span")
     return {"slack_steps": [int(c) for c in np.count_nonzero(corr > 0, axis=0)],
             "max_correction_N": [float(c) for c in corr.max(axis=0)], "positions_m": positions}
 
@@ -111,7 +111,7 @@ def _last_span(state, spans_done: int, plots) -> dict:
         overlay = [master.column("catenary", "force_at_sample", s * n, (s + 1) * n)
                    for s in range(max(0, spans_done - 10), spans_done)]
         report.plot_contact_force(out_dir / "contact_force.png", dt, overlay, ref, filtered,
-                                  f"{case.name}: {case.speed_kmh:.0f} km/h, {state.status} after {spans_done} spans",
+                                  f"{case.title}: {case.speed_kmh:.0f} km/h, {state.status} after {spans_done} spans",
                                   case.speed_m_s)
     return out
 
@@ -143,7 +143,7 @@ def summarise_run(state) -> RunSummary:
     history = state.monitor.history if state.monitor is not None else []
     if history and plots():
         report.plot_convergence(prepared.out_dir / "convergence.png", history, case.values["run"]["convergence_tol"],
-                                f"{case.name}: {case.hil_update}-by-{case.hil_update} updating, "
+                                f"{case.title}: {case.hil_update}-by-{case.hil_update} updating, "
                                 f"mu_c = {case.relaxation}")
     status, message, signal_name = _final_status(state)
     wall = state.wall_s

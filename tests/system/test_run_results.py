@@ -77,3 +77,11 @@ def test_a_run_logs_its_progress_in_lines(tmp_path):
                     "--set", "run.max_spans=3")
     assert proc.returncode == 1, proc.stderr
     assert "\r" not in proc.stderr and "asm_250: 3/3 span (100 %)" in proc.stderr
+
+
+def test_plot_titles_name_the_overrides():
+    from pantohil.models.case import load_case
+
+    assert load_case(None).title == "asm_250"
+    assert load_case(None, ["hil.max_frequency_hz=20", "run.max_spans=3"]).title == \
+        "asm_250 [hil.max_frequency_hz=20, run.max_spans=3]"
