@@ -34,6 +34,7 @@ _WINDOW = 4096  # how many recent sequence numbers are remembered for late/dupli
 _SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # Linux; the socket module does not export it
 _ANCILLARY_BYTES = socket.CMSG_SPACE(16)
 _RCVBUF_BYTES = 4 << 20
+FIRST_ANSWER_TIMEOUT_S = 1.0  # the session's first answer may wait this long: a rig's first step can be slow
 MAX_RIG_LATENCY_STEPS = 100_000  # a STATUS reporting more is refused (the range of hil.delay_steps)
 REFUSED_LATENCY = 256  # rig_refusal bit set by this side: the STATUS's latency is not a step count in range
 
@@ -287,8 +288,8 @@ class PantohilAdapter(PantohilSlave):
             return True
         msg = self._early.pop(awaited, None)
         if msg is None:
-            msg = self._receive(time.perf_counter() + self.receive_timeout_s,
-                                lambda m: m.type == proto.FORCE and m.seq == awaited)
+            timeout = self.receive_timeout_s if self.received else max(self.receive_timeout_s, FIRST_ANSWER_TIMEOUT_S)
+            msg = self._receive(time.perf_counter() + timeout, lambda m: m.type == proto.FORCE and m.seq == awaited)
             if msg is not None and self._early:  # it came after a later answer: a reordering
                 self.reordered += 1
         self._take(msg, awaited)

@@ -1,6 +1,6 @@
 """FMU states as data: the serialized form of fmi2SerializeFMUstate and of a run's checkpoint.
 
-A state is a tree of plain values (None, bool, int, float, str), containers (list, tuple, dict,
+A state is a tree of plain values (None, bool, int, float, complex, str), containers (list, tuple, dict,
 OrderedDict, deque), numeric numpy arrays and scalars, numpy random generators (their bit
 generator's state) and instances of pantohil's own classes (their attributes). It is written as
 JSON; arrays as base64 of their bytes with dtype and shape. Reading it creates objects without
@@ -66,6 +66,8 @@ class _Encoder:
             return v
         if isinstance(v, (int, float)) and type(v) in (int, float):
             return v
+        if type(v) is complex:
+            return {"$z": [v.real, v.imag]}
         if id(v) in self.constants:
             return {"$c": self.constants[id(v)]}
         if id(v) in self.memo:
@@ -124,6 +126,9 @@ class _Decoder:
             return _dtype(t["dtype"]).type(t["$s"])
         if "$t" in t:
             return tuple(self.value(x) for x in t["$t"])
+        if "$z" in t:
+            re_part, im_part = t["$z"]
+            return complex(float(re_part), float(im_part))
         return self._shared(t)
 
     def _shared(self, t: dict):

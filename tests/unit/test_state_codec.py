@@ -23,7 +23,8 @@ def test_a_state_round_trips_with_its_sharing_and_its_constants():
     gen = np.random.default_rng(5)
     gen.normal(size=3)
     value = {"hil": hil, "same": hil.last_force, "q": deque([1, 2.5], maxlen=3), "o": OrderedDict([(3, "x")]),
-             "t": (np.float32(1.5), np.int64(-2), None, True), "rng": gen, "nan": float("nan"), "big": 2 ** 100}
+             "t": (np.float32(1.5), np.int64(-2), None, True), "rng": gen, "nan": float("nan"), "big": 2 ** 100,
+             "gain": complex(0.5, -2.0)}
     data = state_codec.encode(value, {id(op): "op"})
     back = state_codec.decode(data, {"op": op})
     assert back["hil"].op is op and isinstance(back["hil"], PeriodicHil)
@@ -32,6 +33,7 @@ def test_a_state_round_trips_with_its_sharing_and_its_constants():
     assert back["q"] == value["q"] and back["q"].maxlen == 3 and back["o"] == value["o"]
     assert back["t"][0].dtype == np.float32 and back["t"][1] == -2 and back["t"][2:] == (None, True)
     assert back["rng"].normal() == gen.normal() and np.isnan(back["nan"]) and back["big"] == 2 ** 100
+    assert back["gain"] == complex(0.5, -2.0)
 
 
 @pytest.mark.parametrize("tree", [
