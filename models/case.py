@@ -9,7 +9,6 @@ import copy
 import dataclasses
 import math
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +19,7 @@ from pantohil.models.catenary.profile import DropperProfile, ProfileError, Tabul
 from pantohil.models.catenary.receptance import harmonic_count
 from pantohil.models.data import CASES_DIR
 from pantohil.models.hil.loop import HilSettings
-from pantohil.models.input_files import InputFileError, load_toml
+from pantohil.models.input_files import InputFileError, TomlSyntaxError, load_toml, loads_toml
 from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.parameters import (
     AUTO,
@@ -74,15 +73,25 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
         section, key = (part.strip() for part in dotted.split(".", 1))
         if not _SET_KEY.fullmatch(section) or not _SET_KEY.fullmatch(key):
             raise CaseError(f"override {item!r}: expected section.key=value with plain names")
-        try:
-            parsed = tomllib.loads(f"v = {value.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            parsed = value.strip()
+        parsed = _override_value(item, f"{section}.{key}", value.strip())
         table = out.setdefault(section, {})
         if not isinstance(table, dict):
             raise CaseError(f"override {item!r}: {section} is not a table in the case file (it is {table!r})")
         table[key] = parsed
     return out
+
+
+def _override_value(item: str, dotted: str, value: str):
+    """An override's value parsed as TOML (checked as every input file is), else taken as a string."""
+    try:
+        return loads_toml(f"v = {value}", "override")["v"]
+    except TomlSyntaxError:
+        return value
+    except InputFileError as exc:
+        message = str(exc).removeprefix("override: ")
+        if message.startswith("v"):
+            message = dotted + message[1:]
+        raise CaseError(f"override {item[:60]!r}: {message}") from None
 
 
 def _coerce_number(key: Key, value):

@@ -13,9 +13,10 @@ import numpy as np
 from pantohil.models.catenary.asm.string import AsmParameters
 from pantohil.models.catenary.fe.asm_fit import (attenuation, dominant_wavelength, fit_density, is_propagating,
     support_stiffness_from)
-from pantohil.models.catenary.fe.definition import CatenaryDefinition, load_definition
+from pantohil.models.catenary.fe.definition import CatenaryDefinition, CatenaryError, load_definition
 from pantohil.models.catenary.asm.closed_form import one_sided_harmonics
 from pantohil.models.catenary.fe.model import contact_wire_profile, form_find, harmonic_responses, vertical_stiffness
+from pantohil.models.input_files import InputFileError, read_input_bytes
 from pantohil.models.storage import cache_root, write_text_atomic
 
 FIT_BANDS_HZ = ((5.0, 20.0), (10.0, 20.0), (10.0, 40.0))
@@ -140,7 +141,11 @@ def cached_analysis(path: Path) -> CatenaryAnalysis:
     """The analysis of a catenary file, from the cache when the file has not changed (atomic writes)."""
     path = Path(path)
     cat = load_definition(path)
-    key = hashlib.sha256(f"{ANALYSIS_VERSION}".encode() + path.read_bytes()).hexdigest()[:20]
+    try:
+        data = read_input_bytes(path, "catenary file")  # the bytes whose analysis is cached, read as checked
+    except InputFileError as exc:
+        raise CatenaryError(str(exc)) from None
+    key = hashlib.sha256(f"{ANALYSIS_VERSION}".encode() + data).hexdigest()[:20]
     entry = cache_dir() / f"{key}.json"
     if entry.exists():
         try:
