@@ -94,6 +94,11 @@ def _override_value(item: str, dotted: str, value: str):
         raise CaseError(f"override {item[:60]!r}: {message}") from None
 
 
+def _shown(value) -> str:
+    """A refused number as given, with every digit that tells it from the range's bound (repr)."""
+    return str(value) if isinstance(value, int) else repr(float(value))
+
+
 def _coerce_number(key: Key, value):
     name, p = key.dotted, key.param
     if key.type is int:
@@ -109,7 +114,7 @@ def _coerce_number(key: Key, value):
         value = float(value)
     if not p.contains(value):
         unit = f" {p.unit}" if p.unit != "1" else ""
-        shown = str(value) if isinstance(value, int) else f"{value:g}"
+        shown = _shown(value)
         raise CaseError(f"{name}: {shown}{unit} is outside its range {p.range_text()}")
     return value
 
@@ -127,7 +132,7 @@ def _coerce_list(key: Key, value) -> list:
             raise CaseError(f"{name}[{i}]: must be a finite number, got {v!r}")
         if not p.contains(v):
             raise CaseError(
-                f"{name}[{i}]: {v:g} {p.unit} is outside its range {p.range_text()}".replace(" 1 is", " is")
+                f"{name}[{i}]: {_shown(v)} {p.unit} is outside its range {p.range_text()}".replace(" 1 is", " is")
             )
     return [float(v) for v in value]
 
