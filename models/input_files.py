@@ -33,8 +33,8 @@ class TomlSyntaxError(InputFileError):
     """Text that is not TOML at all (as opposed to TOML holding a value pantohil refuses)."""
 
 
-def read_input_bytes(path: Path, what: str, max_bytes: int = MAX_INPUT_BYTES) -> bytes:
-    """The bytes of a regular file of at most max_bytes bytes (not a directory, a device or a FIFO)."""
+def open_regular(path: Path, what: str) -> int:
+    """A descriptor of a regular file, opened without waiting (a FIFO, a device or a directory is refused)."""
     path = Path(path)
     if "\0" in str(path):
         raise InputFileError(f"{what} {str(path)!r}: a file name cannot hold a NUL character")
@@ -45,13 +45,35 @@ def read_input_bytes(path: Path, what: str, max_bytes: int = MAX_INPUT_BYTES) ->
     except OSError as exc:
         raise InputFileError(f"{what} {path}: {exc.strerror}") from None
     try:
-        info = os.fstat(fd)
-        if stat.S_ISDIR(info.st_mode):
-            raise InputFileError(f"{what} {path} is a directory, not a file")
-        if not stat.S_ISREG(info.st_mode):
-            raise InputFileError(f"{what} {path} is not a regular file")
-        if info.st_size > max_bytes:
-            raise InputFileError(f"{what} {path} is {info.st_size} bytes, above the limit of {max_bytes} bytes")
+        mode = os.fstat(fd).st_mode
+    except OSError as exc:
+        os.close(fd)
+        raise InputFileError(f"{what} {path}: {exc.strerror}") from None
+    if not stat.S_ISREG(mode):
+        os.close(fd)
+        kind = "is a directory, not a file" if stat.S_ISDIR(mode) else "is not a regular file"
+        raise InputFileError(f"{what} {path} {kind}")
+    return fd
+
+
+def read_input_chunk(path: Path, what: str, offset: int, max_bytes: int) -> bytes:
+    """At most max_bytes of a regular file from offset (a file that grows while it is read, such as a log)."""
+    fd = open_regular(path, what)
+    try:
+        return os.pread(fd, max_bytes, offset)
+    except OSError as exc:
+        raise InputFileError(f"{what} {path}: {exc.strerror}") from None
+    finally:
+        os.close(fd)
+
+
+def read_input_bytes(path: Path, what: str, max_bytes: int = MAX_INPUT_BYTES) -> bytes:
+    """The bytes of a regular file of at most max_bytes bytes (not a directory, a device or a FIFO)."""
+    fd = open_regular(path, what)
+    try:
+        size = os.fstat(fd).st_size
+        if size > max_bytes:
+            raise InputFileError(f"{what} {path} is {size} bytes, above the limit of {max_bytes} bytes")
         with os.fdopen(fd, "rb", closefd=False) as fh:
             data = fh.read(max_bytes + 1)
     except OSError as exc:

@@ -102,7 +102,8 @@ def _add_watch_command(sub) -> None:
     watch = sub.add_parser("watch", help="follow a run's log as it is written: convergence, span force, newest "
                                          "values (a terminal view; Foxglove users: `run --live`)")
     watch.add_argument("folder", type=Path, help="run folder (the --out of `pantohil run`)")
-    watch.add_argument("--interval", type=float, default=0.5, metavar="S", help="seconds between reads (default 0.5)")
+    watch.add_argument("--interval", type=number(0.01, 60.0, unit="s"), default=0.5, metavar="S",
+                       help="seconds between reads (default 0.5)")
     watch.add_argument("--once", action="store_true", help="show what the log holds now and exit")
 
 
@@ -645,6 +646,10 @@ def _cmd_compare(args) -> int:
     from pantohil.orchestrator.fem_sim import compare_runs
 
     r = compare_runs(args.run_a, args.run_b, args.out)
+    if r["std_difference_pct"] is None:  # the second run's force does not vary: no % of its std
+        print(f"std {r['a']['std_N']:.2f} N ({r['a']['label']}) vs {r['b']['std_N']:.2f} N ({r['b']['label']}, "
+              f"constant); rms difference {r['rms_difference_N']:.2f} N")
+        return 0
     print(f"std {r['a']['std_N']:.2f} N ({r['a']['label']}) vs {r['b']['std_N']:.2f} N ({r['b']['label']}): "
           f"{r['std_difference_pct']:+.2f} %; rms difference {r['rms_difference_N']:.2f} N = "
           f"{r['rms_difference_pct_of_std_b']:.2f} % of the second std")

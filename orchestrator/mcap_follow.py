@@ -16,8 +16,12 @@ from mcap.exceptions import EndOfFile, McapError
 from mcap.records import Channel, Chunk, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
 
+from pantohil.models.input_files import InputFileError, read_input_chunk
+
 MAGIC = b"\x89MCAP0\r\n"
 _HEADER = struct.Struct("<BQ")
+MAX_RECORD_BYTES = 32 * 1024 * 1024  # a record (a chunk of at most CHUNK_BYTES, compressed) is far smaller
+MAX_POLL_BYTES = 2 * MAX_RECORD_BYTES  # read per poll: always room for one whole record
 
 
 class McapFollowError(ValueError):
@@ -30,11 +34,22 @@ def complete_records_end(data: bytes, start: int) -> tuple[int, bool]:
     offset, footer = start, False
     while offset + _HEADER.size <= len(data):
         opcode, length = _HEADER.unpack_from(data, offset)
+        if length > MAX_RECORD_BYTES:
+            raise McapFollowError(f"a record of {length} bytes at byte {offset}, above the limit of "
+                                  f"{MAX_RECORD_BYTES} bytes")
         end = offset + _HEADER.size + length
         if end > len(data):
             break
         offset, footer = end, footer or opcode == 0x02
     return offset, footer
+
+
+def _message(data: bytes) -> dict:
+    """A logged message: a JSON object (its values are shown only where they are numbers)."""
+    msg = json.loads(data)
+    if not isinstance(msg, dict):
+        raise ValueError(f"a message is not a JSON object ({type(msg).__name__})")
+    return msg
 
 
 class McapFollower:
@@ -51,9 +66,10 @@ class McapFollower:
         """The messages of the records completed since the last poll, as (topic, log time ns, JSON)."""
         if self.finished:
             return []
-        with open(self.path, "rb") as f:
-            f.seek(self.offset)
-            data = f.read()
+        try:  # a regular file only (not a FIFO or a device), a bounded read per poll
+            data = read_input_chunk(self.path, "run log", self.offset, MAX_POLL_BYTES)
+        except InputFileError as exc:
+            raise McapFollowError(str(exc)) from None
         start = 0
         if self.offset == 0:
             if len(data) < len(MAGIC):
@@ -61,7 +77,10 @@ class McapFollower:
             if not data.startswith(MAGIC):
                 raise McapFollowError(f"{self.path} is not an MCAP file")
             start = len(MAGIC)
-        end, footer = complete_records_end(data, start)
+        try:
+            end, footer = complete_records_end(data, start)
+        except McapFollowError as exc:
+            raise McapFollowError(f"{self.path}: {exc}") from None
         if end == start:
             self.offset += start
             return []
@@ -77,13 +96,13 @@ class McapFollower:
                 if isinstance(record, Channel):
                     self._topics[record.id] = record.topic
                 elif isinstance(record, Message) and record.channel_id in self._topics:
-                    out.append((self._topics[record.channel_id], record.log_time, json.loads(record.data)))
+                    out.append((self._topics[record.channel_id], record.log_time, _message(record.data)))
                 elif isinstance(record, Metadata) and record.name == "run":
                     self.metadata = dict(record.metadata)
                 elif isinstance(record, (Footer, Chunk)):
                     continue
         except EndOfFile:  # the stream of complete records ends without the file's closing magic
             pass
-        except McapError as exc:
-            raise McapFollowError(f"{self.path}: {exc}") from None
+        except (McapError, ValueError) as exc:
+            raise McapFollowError(f"{self.path}: {' '.join(str(exc).split())}") from None
         return out
