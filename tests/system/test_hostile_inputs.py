@@ -220,6 +220,12 @@ CASES = [
         ),
     ),
     _cat(
+        "catenary-elements-per-span",
+        ("catenary.span_m / catenary.mesh_size_m", "limit of 1000", "GiB"),
+        ("span_m = 55.0", "span_m = 1000.0"),
+        ("mesh_size_m = 0.25", "mesh_size_m = 0.5"),
+    ),
+    _cat(
         "catenary-missing-section",
         ("messenger_wire", "missing section"),
         ("[messenger_wire]\nlinear_mass_kg_m = 1.08\nbending_stiffness_N_m2 = 131.7\ntension_N = 16000.0\n", ""),
