@@ -397,7 +397,7 @@ def _cmd_run(args, stop) -> int:
             case, resume = _resume_case(args)
             args.out = args.resume
         elif args.case is not None and args.case.suffix == ".ssp":
-            from pantohil.builder.ssp import SspError, read_ssp, temporary_dir
+            from pantohil.builder.ssp import SspError, read_ssp, ssp_case, temporary_dir
 
             if any(not o.startswith("run.") for o in args.overrides):
                 raise CaseError("--set: an SSP file fixes its system; only run.* keys can be overridden")
@@ -405,11 +405,11 @@ def _cmd_run(args, stop) -> int:
                 raise CaseError(f"SSP file {args.case} does not exist or is not a file")
             unpacked = temporary_dir("pantohil_ssp_")
             cleanup.callback(shutil.rmtree, unpacked, True)
-            try:
+            try:  # the case as the SSP's parameter values make it, validated as any case
                 system = read_ssp(args.case, unpacked)
+                case = ssp_case(args.case, system, args.overrides)
             except SspError as exc:
                 raise CaseError(str(exc)) from None
-            case = load_case(system["case_file"], args.overrides)
         else:
             case = load_case(args.case, args.overrides)
         checkpoint_info = None  # an SSP run saves no checkpoint: its system lives in a temporary folder
