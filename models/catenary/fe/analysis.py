@@ -17,7 +17,7 @@ from pantohil.models.catenary.fe.definition import CatenaryDefinition, CatenaryE
 from pantohil.models.catenary.asm.closed_form import one_sided_harmonics
 from pantohil.models.catenary.fe.model import contact_wire_profile, form_find, harmonic_responses, vertical_stiffness
 from pantohil.models.input_files import InputFileError, read_input_bytes
-from pantohil.models.storage import cache_root, write_text_atomic
+from pantohil.models.storage import cache_folder, cache_root, write_text_atomic
 
 FIT_BANDS_HZ = ((5.0, 20.0), (10.0, 20.0), (10.0, 40.0))
 ANALYSIS_VERSION = 2
@@ -153,6 +153,6 @@ def cached_analysis(path: Path) -> CatenaryAnalysis:
         except (ValueError, TypeError):
             pass  # unreadable entry: recompute and replace it
     result = analyse(cat)
-    entry.parent.mkdir(parents=True, exist_ok=True)
+    cache_folder(entry.parent)
     write_text_atomic(entry, json.dumps(result.__dict__))
     return result

@@ -15,7 +15,7 @@ import numpy as np
 
 from pantohil.models.catenary.pfem.operators import PfemOperators, PfemSettings
 from pantohil.models.input_files import InputFileError, open_regular
-from pantohil.models.storage import atomic_path
+from pantohil.models.storage import atomic_path, cache_folder
 
 FORMAT_VERSION = 1
 MAX_META_BYTES = 1 << 20  # the meta record: settings and build info, a few kB
@@ -31,7 +31,7 @@ class OperatorFileError(ValueError):
 def save_operators(ops: PfemOperators, path: Path, key: str) -> int:
     """Write the operators to `path` atomically (a partial file never carries the final name). Returns bytes."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    cache_folder(path.parent)
     meta = {"format_version": FORMAT_VERSION, "key": key, "settings": asdict(ops.settings), "info": ops.info}
     with atomic_path(path) as part, open(part, "wb") as fh:
         np.savez(fh, meta=np.array(json.dumps(meta)),
