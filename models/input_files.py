@@ -138,26 +138,29 @@ def first_non_finite(value, where: str = "") -> str | None:
     return found[0] if found is not None and found[1] == "must be a finite number" else None
 
 
-def toml_nesting(text: str, limit: int = MAX_NESTING) -> int:
-    """The deepest nesting of lists and inline tables in TOML text (strings and comments skipped), counted
-    up to the first level above limit."""
+def toml_nesting(text: str, limit: int = MAX_NESTING) -> tuple[int, int]:
+    """The deepest nesting of lists and inline tables in TOML text (strings and comments skipped), counted up
+    to the first level above limit, and the line (from 1) where it is reached."""
     depth = deepest = 0
+    where = 0
     for token in _TOML_TOKEN.finditer(text):
         t = token.group()
         if t in "[{":
             depth += 1
-            deepest = max(deepest, depth)
+            if depth > deepest:
+                deepest, where = depth, token.start()
             if deepest > limit:
                 break
         elif t in "]}":
             depth = max(0, depth - 1)
-    return deepest
+    return deepest, text.count("\n", 0, where) + 1
 
 
 def loads_toml(text: str, what: str) -> dict:
     """TOML text as a dict, checked as `first_problem` says; InputFileError names `what` and the key."""
-    if toml_nesting(text) > MAX_NESTING:
-        raise InputFileError(f"{what}: nests deeper than {MAX_NESTING} lists or tables")
+    depth, line = toml_nesting(text)
+    if depth > MAX_NESTING:
+        raise InputFileError(f"{what}: line {line} nests deeper than {MAX_NESTING} lists or tables")
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -12,7 +12,7 @@ import json
 import struct
 from pathlib import Path
 
-from mcap.exceptions import EndOfFile, McapError
+from mcap.exceptions import EndOfFile
 from mcap.records import Channel, Chunk, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
 
@@ -103,6 +103,7 @@ class McapFollower:
                     continue
         except EndOfFile:  # the stream of complete records ends without the file's closing magic
             pass
-        except (McapError, ValueError) as exc:
-            raise McapFollowError(f"{self.path}: {' '.join(str(exc).split())}") from None
+        except Exception as exc:  # McapError, a decompressor's error, a bad struct or JSON: a damaged record
+            detail = " ".join(str(exc).split())[:200] or type(exc).__name__
+            raise McapFollowError(f"{self.path}: a record cannot be read ({detail})") from None
         return out
