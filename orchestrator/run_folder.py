@@ -24,7 +24,7 @@ SUMMARY = "summary.json"
 STEADY_SPAN = "steady_span.csv"  # t_s, z0_m, z_m, f_N of the converged span (HIL runs)
 CENTRAL_SPANS = "central_spans.csv"  # span, t_s, f_N, f_lowpass_N of a fem-sim section
 RUNS_ROOT = Path("runs")
-MAX_SUMMARY_BYTES = 4 * 1024 * 1024
+MAX_SUMMARY_BYTES = 64 * 1024 * 1024  # a summary of 10000 spans is about 2 MB
 MAX_TABLE_BYTES = 256 * 1024 * 1024  # about 40 bytes a row: 6 million rows, 60 central spans of 100,000 samples
 
 

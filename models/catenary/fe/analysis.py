@@ -16,7 +16,7 @@ from pantohil.models.catenary.fe.asm_fit import (attenuation, dominant_wavelengt
 from pantohil.models.catenary.fe.definition import CatenaryDefinition, CatenaryError, load_definition
 from pantohil.models.catenary.asm.closed_form import one_sided_harmonics
 from pantohil.models.catenary.fe.model import contact_wire_profile, form_find, harmonic_responses, vertical_stiffness
-from pantohil.models.input_files import InputFileError, read_input_bytes
+from pantohil.models.input_files import InputFileError, read_input_bytes, read_input_text
 from pantohil.models.storage import cache_folder, cache_root, write_text_atomic
 
 FIT_BANDS_HZ = ((5.0, 20.0), (10.0, 20.0), (10.0, 40.0))
@@ -148,10 +148,10 @@ def cached_analysis(path: Path) -> CatenaryAnalysis:
     key = hashlib.sha256(f"{ANALYSIS_VERSION}".encode() + data).hexdigest()[:20]
     entry = cache_dir() / f"{key}.json"
     if entry.exists():
-        try:
-            return CatenaryAnalysis(**json.loads(entry.read_text()))
-        except (ValueError, TypeError):
-            pass  # unreadable entry: recompute and replace it
+        try:  # a regular file of bounded size (a FIFO or a device planted in the cache does not hang)
+            return CatenaryAnalysis(**json.loads(read_input_text(entry, "catenary cache entry")))
+        except (ValueError, TypeError):  # InputFileError included: an unreadable entry is recomputed and replaced
+            pass
     result = analyse(cat)
     cache_folder(entry.parent)
     write_text_atomic(entry, json.dumps(result.__dict__))
