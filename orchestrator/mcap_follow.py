@@ -20,7 +20,10 @@ from pantohil.models.input_files import InputFileError, read_input_chunk
 
 MAGIC = b"\x89MCAP0\r\n"
 _HEADER = struct.Struct("<BQ")
-MAX_RECORD_BYTES = 32 * 1024 * 1024  # a record (a chunk of at most CHUNK_BYTES, compressed) is far smaller
+# A record (a chunk of at most CHUNK_BYTES, compressed) is far smaller than MAX_RECORD_BYTES. A growing file
+# may show a huge length for a while (the writer patches a record's length once it is written), so a length
+# is not refused by itself: a poll that reads a whole window of MAX_POLL_BYTES without one complete record is.
+MAX_RECORD_BYTES = 32 * 1024 * 1024
 MAX_POLL_BYTES = 2 * MAX_RECORD_BYTES  # read per poll: always room for one whole record
 
 
@@ -34,9 +37,6 @@ def complete_records_end(data: bytes, start: int) -> tuple[int, bool]:
     offset, footer = start, False
     while offset + _HEADER.size <= len(data):
         opcode, length = _HEADER.unpack_from(data, offset)
-        if length > MAX_RECORD_BYTES:
-            raise McapFollowError(f"a record of {length} bytes at byte {offset}, above the limit of "
-                                  f"{MAX_RECORD_BYTES} bytes")
         end = offset + _HEADER.size + length
         if end > len(data):
             break
@@ -77,10 +77,10 @@ class McapFollower:
             if not data.startswith(MAGIC):
                 raise McapFollowError(f"{self.path} is not an MCAP file")
             start = len(MAGIC)
-        try:
-            end, footer = complete_records_end(data, start)
-        except McapFollowError as exc:
-            raise McapFollowError(f"{self.path}: {exc}") from None
+        end, footer = complete_records_end(data, start)
+        if end == start and len(data) >= MAX_POLL_BYTES:  # a whole window without one complete record
+            raise McapFollowError(f"{self.path}: a record at byte {self.offset + start} is larger than the limit "
+                                  f"of {MAX_RECORD_BYTES} bytes")
         if end == start:
             self.offset += start
             return []
