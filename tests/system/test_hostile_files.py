@@ -343,6 +343,19 @@ def test_compare_and_watch_on_fuzzed_run_folders(tmp_path):
     assert outcomes[2] >= 40, outcomes
 
 
+def test_a_log_record_claiming_a_huge_length_is_refused_after_one_window(tmp_path):
+    """Issue 28, D16: a log is read in bounded windows; a record claiming 2^64 - 1 bytes over a whole window of
+    data is a damaged log (while a run writes, a record's length may show so until the writer patches it)."""
+    from pantohil.orchestrator.mcap_follow import MAGIC, MAX_POLL_BYTES
+
+    folder = _run_folder(tmp_path / "huge")
+    with open(folder / "run.mcap", "wb") as fh:
+        fh.write(MAGIC + b"\x06" + b"\xff" * 8)
+        fh.truncate(MAX_POLL_BYTES + 64)
+    code, err = run_main(["watch", str(folder), "--once"])
+    assert code == 2 and err.count("\n") == 1 and "larger than the limit" in err, err
+
+
 def test_compare_of_a_constant_run_reports_no_percentage(tmp_path):
     """Issue 28, D16: a run whose force does not vary gave a 1e17 % difference of the std."""
     a, b = _run_folder(tmp_path / "a"), _run_folder(tmp_path / "b", std=0.0)
