@@ -138,6 +138,10 @@ def first_non_finite(value, where: str = "") -> str | None:
     return found[0] if found is not None and found[1] == "must be a finite number" else None
 
 
+def _first_line(exc: Exception) -> str:
+    return str(exc).split(";")[0].splitlines()[0] if str(exc) else type(exc).__name__
+
+
 def toml_nesting(text: str, limit: int = MAX_NESTING) -> tuple[int, int]:
     """The deepest nesting of lists and inline tables in TOML text (strings and comments skipped), counted up
     to the first level above limit, and the line (from 1) where it is reached."""
@@ -167,6 +171,8 @@ def loads_toml(text: str, what: str) -> dict:
         raise TomlSyntaxError(f"{what} is not valid TOML: {exc}") from None
     except RecursionError:  # a bound the nesting scan missed: still one line
         raise InputFileError(f"{what}: nests too deeply") from None
+    except ValueError as exc:  # an integer of more digits than Python converts (4300)
+        raise InputFileError(f"{what}: holds an integer too long to read ({_first_line(exc)})") from None
     bad = first_problem(raw)
     if bad is not None:
         raise InputFileError(f"{what}: {bad[0]} {bad[1]}")
@@ -187,6 +193,8 @@ def load_json(path: Path, what: str, max_bytes: int = MAX_INPUT_BYTES, kind: typ
         raise InputFileError(f"{what} {path} is not valid JSON: {exc.msg} (line {exc.lineno})") from None
     except RecursionError:
         raise InputFileError(f"{what} {path}: nests too deeply") from None
+    except ValueError as exc:  # an integer of more digits than Python converts (4300)
+        raise InputFileError(f"{what} {path}: holds an integer too long to read ({_first_line(exc)})") from None
     if not isinstance(value, kind):
         raise InputFileError(f"{what} {path}: expected a JSON {'object' if kind is dict else kind.__name__}, "
                              f"got {type(value).__name__}")

@@ -38,7 +38,7 @@ REFUSALS = (CaseError, CatenaryError, RigFileError, InputFileError)
 _NUMBER = re.compile(rb"(?<![\w.])-?\d+(?:\.\d+)?(?:e-?\d+)?(?![\w.])")
 _VALUE = re.compile(rb"^([A-Za-z_][\w]*\s*=\s*)(.+)$", re.M)
 HUGE = (b"100000000000000000000000000000000000000", b"1e400", b"-1e308", b"9223372036854775808", b"2000000000",
-        b"1e-300", b"-9223372036854775809")
+        b"1e-300", b"-9223372036854775809", b"9" * 5000)
 WRONG = (b'"text"', b"true", b"[1, 2]", b"{ a = 1 }", b"[]", b'"a\\u0000b"', b"[" * 40 + b"]" * 40)
 
 
@@ -294,7 +294,8 @@ def _run_folder(folder: Path, n: int = 200, std: float = 10.0) -> Path:
     return folder
 
 
-JSON_MUTANTS = (b"[1, 2]", b'"text"', b"null", b"{", b'{"dt_s": NaN}', b'{"dt_s": "x"}', b'{"dt_s": -1}',
+JSON_MUTANTS = (b'{"dt_s": ' + b"9" * 5000 + b"}",
+                b"[1, 2]", b'"text"', b"null", b"{", b'{"dt_s": NaN}', b'{"dt_s": "x"}', b'{"dt_s": -1}',
                 b'{"dt_s": 1e400}', b"[" * 5000 + b"]" * 5000, b'{"a": "\\u0000"}', b"\xff\xfe", b"")
 
 

@@ -164,6 +164,8 @@ CASES = [
     _case("case-deep-nesting", ("line 56", "nests deeper than 32"), append="x = " + "[" * 5000 + "]" * 5000 + "\n"),
     _case("case-dotted-deep", ("nests deeper than 32",), append="[run.a]\n" + ".".join(["b"] * 100) + " = 1\n"),
     _case("case-int-beyond-64-bits", ("catenary.tension_N", "64-bit range"), (TENSION, "tension_N = " + "9" * 400)),
+    _case("case-int-5000-digits", ("case file", "4300"), append="x = " + "9" * 5000 + "\n"),
+    _set("set-int-5000-digits", "run.max_spans=" + "9" * 5000, ("override", "4300")),
     _case("case-nul-in-file-name", ("profile.csv_file", "NUL"),
           ('source = "droppers"', 'source = "csv"\ncsv_file = "profile\\u0000.csv"')),
     # refusals that name the right value and key (issue 28, D25)
