@@ -12,6 +12,7 @@ import importlib
 import io
 import json
 import shutil
+import sys
 import tempfile
 import uuid
 import xml.etree.ElementTree as ET
@@ -25,13 +26,15 @@ from pantohil.fmus import fmu_support
 from pantohil.models.case import Case
 from pantohil.models.catenary.profile import write_profile_csv
 from pantohil.models.rig.rig_file import rig_to_toml
-from pantohil.models.storage import atomic_path, cache_root
+from pantohil.models.input_files import InputFileError, read_input_bytes
+from pantohil.models.storage import atomic_path, cache_folder, cache_root, write_text_atomic
 
 from . import loader
 from .operators import case_operators
 from .system import FMU_NAMES, loop_latency_steps
 
 BUILDER_VERSION = "14"
+MAX_FMU_BYTES = 256 * 1024 * 1024  # a cache entry read to check its digest (a built FMU is about 4 MB)
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}
@@ -267,6 +270,29 @@ def _add_loader(fmu: Path, xml: bytes, runtime: loader.PythonRuntime, tmp: Path)
     return {binary: built.read_bytes(), f"binaries/{loader.PLATFORM}/{identifier}{loader.INNER_SUFFIX}.so": inner}
 
 
+def _digest_path(cached: Path) -> Path:
+    return cached.with_name(cached.name + ".sha256")
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(read_input_bytes(path, "FMU cache entry", MAX_FMU_BYTES)).hexdigest()
+
+
+def _entry_is_whole(cached: Path) -> bool:
+    """Whether an FMU cache entry is there and whole: its bytes hash to the digest stored beside it when it was
+    made. A damaged entry (truncated, a bit flipped, no digest) is reported in one line and rebuilt."""
+    if not cached.exists() and not cached.is_symlink():
+        return False
+    try:
+        whole = _digest_path(cached).read_text().strip() == _sha256(cached)
+    except (OSError, UnicodeDecodeError, InputFileError):
+        whole = False
+    if not whole:
+        print(f"pantohil: the FMU cache entry {cached} does not match its digest (damaged or incomplete): "
+              "rebuilding it", file=sys.stderr, flush=True)
+    return whole
+
+
 def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path, bool]:
     """Build (or fetch from the cache) one FMU and copy it to dest_dir. Returns (path, cached)."""
     experiment = default_experiment(case)
@@ -277,7 +303,7 @@ def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path
         files = _stage(name, params, case, stage)
         key = _digest(name, files, experiment, runtime)
         cached = cache_root() / "fmus" / key / f"{CLASS_NAMES[name]}.fmu"
-        hit = cached.exists()
+        hit = _entry_is_whole(cached)
         if not hit:
             variables = _variables(name)
             doc = Path(tmp) / "doc"
@@ -294,9 +320,10 @@ def build_fmu(name: str, params: dict, case: Case, dest_dir: Path) -> tuple[Path
                 xml = z.read("modelDescription.xml")
             _rewrite_zip(fmu, {"modelDescription.xml": decorate_model_description(xml, variables, experiment, key),
                                **_add_loader(fmu, xml, runtime, Path(tmp))})
-            cached.parent.mkdir(parents=True, exist_ok=True)
+            cache_folder(cached.parent)
             with atomic_path(cached) as part:  # no half-written cache entry
                 shutil.copy2(fmu, part)
+            write_text_atomic(_digest_path(cached), _sha256(cached) + "\n")  # after the FMU: a check at use
     dest_dir.mkdir(parents=True, exist_ok=True)
     target = dest_dir / f"{name}.fmu"
     shutil.copy2(cached, target)

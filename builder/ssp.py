@@ -2,6 +2,8 @@
 .ssv + the case file) and an OspSystemStructure.xml for libcosim, both of the standard topology."""
 from __future__ import annotations
 
+import math
+import os
 import shutil
 import tempfile
 import xml.etree.ElementTree as ET
@@ -11,6 +13,9 @@ from pathlib import Path
 from fmpy import read_model_description
 
 from pantohil.fmus.fmu_support import UNITS
+from pantohil.models.case import CaseError, apply_overrides, build_case, load_case_dict
+from pantohil.models.input_files import InputFileError, open_regular
+from pantohil.models.parameters import fmu_keys, fmu_variable_names
 from pantohil.models.storage import atomic_path
 
 from .system import CONNECTIONS
@@ -23,6 +28,11 @@ OMS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/
 CASE_RESOURCE = "resources/case.toml"
 PARAMETERS_RESOURCE = "resources/parameters.ssv"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
+# An SSP of pantohil holds 3 FMUs of about 4 MB, an .ssd, an .ssv and the case: far below these bounds,
+# which are checked from the archive's directory before anything is extracted.
+MAX_SSP_MEMBERS = 64
+MAX_SSP_MEMBER_BYTES = 256 * 1024 * 1024
+MAX_SSP_BYTES = 512 * 1024 * 1024
 
 ET.register_namespace("ssc", SSC)
 ET.register_namespace("ssd", SSD)
@@ -172,21 +182,72 @@ class SspError(ValueError):
     """An SSP file that cannot be run; one line."""
 
 
-def read_ssp(path: Path, into: Path) -> dict:
-    """Unpack an SSP written by write_ssp: FMUs, connections, parameter values and the case text."""
+def _check_archive(z: zipfile.ZipFile, ssp: Path) -> None:
+    """Refuse, before anything is extracted, an archive whose members are too many or too large (by their
+    uncompressed sizes, which the extraction cannot exceed), or whose names leave the folder."""
+    members = z.infolist()
+    if len(members) > MAX_SSP_MEMBERS:
+        raise SspError(f"{ssp}: {len(members)} members, above the limit of {MAX_SSP_MEMBERS}")
+    total = 0
+    for m in members:
+        name = m.filename
+        parts = Path(name).parts
+        if name.startswith(("/", "\\")) or ".." in parts or "\0" in name or ":" in (parts[0] if parts else ""):
+            raise SspError(f"{ssp}: member {name!r} leaves the archive's folder")
+        if (m.external_attr >> 16) & 0o170000 == 0o120000:
+            raise SspError(f"{ssp}: member {name!r} is a symbolic link")
+        if m.file_size > MAX_SSP_MEMBER_BYTES:
+            raise SspError(f"{ssp}: member {name!r} unpacks to {m.file_size} bytes, above the limit of "
+                           f"{MAX_SSP_MEMBER_BYTES} bytes")
+        total += m.file_size
+    if total > MAX_SSP_BYTES:
+        raise SspError(f"{ssp}: its members unpack to {total} bytes, above the limit of {MAX_SSP_BYTES} bytes")
+
+
+def _unpack(path: Path, into: Path):
+    """The SSD of an SSP file, its members extracted into `into` after the archive was checked."""
     from fmpy.ssp.ssd import read_ssd
 
-    path = Path(path)
     try:
-        ssd = read_ssd(str(path))
-        with zipfile.ZipFile(path) as z:
+        fd = open_regular(path, "SSP file")
+    except InputFileError as exc:
+        raise SspError(str(exc)) from None
+    try:
+        with os.fdopen(fd, "rb") as fh, zipfile.ZipFile(fh) as z:
+            _check_archive(z, path)
+            ssd = read_ssd(str(path))
             z.extractall(into)
-    except (zipfile.BadZipFile, KeyError, OSError) as exc:
+    except SspError:
+        raise
+    except (zipfile.BadZipFile, KeyError, OSError, EOFError) as exc:
         raise SspError(f"{path}: not a readable SSP file ({exc})") from None
     except Exception as exc:  # schema validation errors of fmpy
         raise SspError(f"{path}: invalid SystemStructure.ssd ({str(exc).splitlines()[0]})") from None
+    return ssd
+
+
+def _parameter_value(ssp: Path, p):
+    """An SSV parameter value as its type says, finite."""
+    try:
+        if p.type == "Real":
+            value = float(p.value)
+        elif p.type == "Boolean":
+            value = p.value in (True, "true")
+        else:
+            value = int(p.value)
+    except (TypeError, ValueError):
+        raise SspError(f"{ssp}: parameter {p.name}: {p.value!r} is not a {p.type} value") from None
+    if isinstance(value, float) and not math.isfinite(value):
+        raise SspError(f"{ssp}: parameter {p.name}: must be a finite number (got {p.value!r})")
+    return value
+
+
+def read_ssp(path: Path, into: Path) -> dict:
+    """Unpack an SSP written by write_ssp: FMUs, connections, parameter values and the case text."""
+    path = Path(path)
+    ssd = _unpack(path, Path(into))
     case_file = Path(into) / CASE_RESOURCE
-    if not case_file.exists():
+    if not case_file.is_file():
         raise SspError(f"{path}: no {CASE_RESOURCE} (not written by pantohil build --ssp)")
     system = ssd.system
     fmus = {c.name: _member_fmu(path, Path(into), c.name, c.source) for c in system.elements}
@@ -195,13 +256,10 @@ def read_ssp(path: Path, into: Path) -> dict:
     for binding in system.parameterBindings:
         for pset in binding.parameterValues:
             for p in pset.parameters:
+                if "." not in str(p.name):
+                    raise SspError(f"{path}: parameter {p.name!r}: expected COMPONENT.VARIABLE")
                 comp, var = p.name.split(".", 1)
-                value = (
-                    float(p.value)
-                    if p.type == "Real"
-                    else (p.value in (True, "true") if p.type == "Boolean" else int(p.value))
-                )
-                parameters.setdefault(comp, {})[var] = value
+                parameters.setdefault(comp, {})[var] = _parameter_value(path, p)
     return {"fmus": fmus, "connections": connections, "parameters": parameters, "case_file": case_file}
 
 
@@ -243,3 +301,85 @@ def check_fmu(fmu: Path, what: str) -> None:
 def temporary_dir(prefix: str) -> Path:
     """A new temporary folder whose name starts with `prefix`."""
     return Path(tempfile.mkdtemp(prefix=prefix))
+
+
+def _same(a, b) -> bool:
+    """Equal values, reals to 1e-9 relative (an SSP written by another build of the same case)."""
+    if isinstance(a, float) or isinstance(b, float):
+        return isinstance(a, (int, float)) and isinstance(b, (int, float)) and math.isclose(a, b, rel_tol=1e-9,
+                                                                                           abs_tol=1e-12)
+    return a == b
+
+
+def _case_value(key, names: list[str], given: dict, current):
+    """The case value a key's FMU variables in an SSP stand for (the naming rule of models/parameters.py)."""
+    if key.param.choices and isinstance(key.param.choices[0], str):
+        index = given[names[0]]
+        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(key.param.choices):
+            raise CaseError(f"{key.dotted} (FMU variable {names[0]}): {index!r} is not the index of one of "
+                            f"{key.param.choices}")
+        return key.param.choices[index]
+    if key.type is bool:
+        return bool(given[names[0]])
+    if key.param.fmu_items:
+        return [given[n] for n in names[:max(1, len(current))]]  # the items past the list must stay 0 (checked)
+    return given[names[0]]
+
+
+def _ssp_changes(case, parameters: dict, expected: dict) -> dict:
+    """{section: {key: value}} of the case keys whose FMU variables the SSP gives other values than its case."""
+    changes: dict[str, dict] = {}
+    for comp, given in parameters.items():
+        for key in fmu_keys(comp):
+            names = fmu_variable_names(key)
+            if any(n in given and not _same(given[n], expected[comp].get(n)) for n in names):
+                present = {n: given.get(n, expected[comp][n]) for n in names}
+                value = _case_value(key, names, present, case.values[key.section][key.name])
+                changes.setdefault(key.section, {})[key.name] = value
+    return changes
+
+
+def _key_variables(comp: str) -> set[str]:
+    return {n for key in fmu_keys(comp) for n in fmu_variable_names(key)}
+
+
+def _check_matches(ssp: Path, parameters: dict, expected: dict, before: dict) -> None:
+    """Every SSP parameter must be what the case it stands for gives its FMU. A derived value (dt, speed, the
+    reference height...) may also be the one of the embedded case (the SSP's key values changed, not it); it
+    is then recomputed from the case that runs."""
+    for comp, given in parameters.items():
+        if comp not in expected:
+            raise SspError(f"{ssp}: parameter {comp}.*: no component {comp!r} in a pantohil system")
+        keys = _key_variables(comp)
+        for var, value in given.items():
+            if var not in expected[comp]:
+                raise SspError(f"{ssp}: parameter {comp}.{var}: not a parameter of the {comp} FMU")
+            want = expected[comp][var]
+            stale = var not in keys and _same(value, before[comp][var])
+            if not (_same(value, want) or stale):
+                raise SspError(f"{ssp}: parameter {comp}.{var} = {value!r} is not what its case gives ({want!r}): "
+                               f"an SSP's parameters must form a valid case")
+
+
+def ssp_case(ssp: Path, system: dict, overrides: list[str]):
+    """The case an SSP runs: its embedded case with the SSP's parameter values in place of the case's, validated
+    as any case (ranges, combinations), so that the run's summary reports the values that ran; the FMU
+    parameters of `system` become that case's. CaseError (one line naming the SSP and the key) for a value out
+    of range; SspError for a parameter that no case gives."""
+    from .build_fmus import default_delay_steps, fmu_parameters
+
+    raw, source = load_case_dict(system["case_file"])
+    case = build_case(apply_overrides(raw, overrides), source)
+    parameters = system["parameters"]
+    before = fmu_parameters(case, default_delay_steps(case))
+    try:
+        changes = _ssp_changes(case, parameters, before)
+        if changes:
+            raw = {**raw, **{s: {**raw.get(s, {}), **v} for s, v in changes.items()}}
+            case = build_case(apply_overrides(raw, overrides), source)
+    except CaseError as exc:
+        raise CaseError(f"SSP file {ssp}: parameters.ssv: {exc}") from None
+    expected = fmu_parameters(case, default_delay_steps(case))
+    _check_matches(ssp, parameters, expected, before)
+    system["parameters"] = {comp: expected[comp] for comp in parameters}
+    return case

@@ -9,7 +9,6 @@ import copy
 import dataclasses
 import math
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +19,7 @@ from pantohil.models.catenary.profile import DropperProfile, ProfileError, Tabul
 from pantohil.models.catenary.receptance import harmonic_count
 from pantohil.models.data import CASES_DIR, catalog
 from pantohil.models.hil.loop import HilSettings
-from pantohil.models.input_files import InputFileError, load_toml
+from pantohil.models.input_files import InputFileError, TomlSyntaxError, load_toml, loads_toml
 from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.parameters import (
     AUTO,
@@ -76,15 +75,30 @@ def apply_overrides(raw: dict, overrides: list[str]) -> dict:
         section, key = (part.strip() for part in dotted.split(".", 1))
         if not _SET_KEY.fullmatch(section) or not _SET_KEY.fullmatch(key):
             raise CaseError(f"override {item!r}: expected section.key=value with plain names")
-        try:
-            parsed = tomllib.loads(f"v = {value.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            parsed = value.strip()
+        parsed = _override_value(item, f"{section}.{key}", value.strip())
         table = out.setdefault(section, {})
         if not isinstance(table, dict):
             raise CaseError(f"override {item!r}: {section} is not a table in the case file (it is {table!r})")
         table[key] = parsed
     return out
+
+
+def _override_value(item: str, dotted: str, value: str):
+    """An override's value parsed as TOML (checked as every input file is), else taken as a string."""
+    try:
+        return loads_toml(f"v = {value}", "override")["v"]
+    except TomlSyntaxError:
+        return value
+    except InputFileError as exc:
+        message = str(exc).removeprefix("override: ")
+        if message.startswith("v"):
+            message = dotted + message[1:]
+        raise CaseError(f"override {item[:60]!r}: {message}") from None
+
+
+def _shown(value) -> str:
+    """A refused number as given, with every digit that tells it from the range's bound (repr)."""
+    return str(value) if isinstance(value, int) else repr(float(value))
 
 
 def _coerce_number(key: Key, value):
@@ -102,7 +116,7 @@ def _coerce_number(key: Key, value):
         value = float(value)
     if not p.contains(value):
         unit = f" {p.unit}" if p.unit != "1" else ""
-        shown = str(value) if isinstance(value, int) else f"{value:g}"
+        shown = _shown(value)
         raise CaseError(f"{name}: {shown}{unit} is outside its range {p.range_text()}")
     return value
 
@@ -120,7 +134,7 @@ def _coerce_list(key: Key, value) -> list:
             raise CaseError(f"{name}[{i}]: must be a finite number, got {v!r}")
         if not p.contains(v):
             raise CaseError(
-                f"{name}[{i}]: {v:g} {p.unit} is outside its range {p.range_text()}".replace(" 1 is", " is")
+                f"{name}[{i}]: {_shown(v)} {p.unit} is outside its range {p.range_text()}".replace(" 1 is", " is")
             )
     return [float(v) for v in value]
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import stat
 import zipfile
 import zlib
 from pathlib import Path
@@ -24,6 +23,7 @@ import numpy as np
 
 from pantohil.fmus import state_codec
 from pantohil.models.case import CaseError
+from pantohil.models.input_files import InputFileError, load_json, read_input_bytes
 
 STATE_DIR = "state"
 ARRAYS = "checkpoint.npz"
@@ -112,9 +112,9 @@ def _check_not_finished(run_folder: Path) -> None:
     if not path.is_file():
         return  # a run that was killed wrote none
     try:
-        status = json.loads(_bounded_bytes(path, MAX_META_BYTES)).get("status")
-    except (ValueError, AttributeError):
-        raise CaseError(f"--resume: {path} is damaged (not a JSON table)") from None
+        status = load_json(path, "--resume: run summary", MAX_META_BYTES).get("status")
+    except InputFileError as exc:
+        raise CaseError(str(exc)) from None
     if status not in RESUMABLE:
         raise CaseError(f"--resume: {run_folder} holds a finished run (status {status!r}); only an interrupted "
                         "run can be resumed")
@@ -123,14 +123,9 @@ def _check_not_finished(run_folder: Path) -> None:
 def _bounded_bytes(path: Path, limit: int) -> bytes:
     """A regular file's bytes, at most `limit` (a FIFO or a device is refused, never waited on)."""
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-    except OSError as exc:
-        raise CaseError(f"--resume: {path}: {exc.strerror}") from None
-    with os.fdopen(fd, "rb") as fh:
-        info = os.fstat(fh.fileno())
-        if not stat.S_ISREG(info.st_mode) or info.st_size > limit:
-            raise CaseError(f"--resume: {path} is not a regular file of at most {limit} bytes")
-        return fh.read(limit + 1)
+        return read_input_bytes(path, "--resume: checkpoint file", limit)
+    except InputFileError as exc:
+        raise CaseError(str(exc)) from None
 
 
 _META_TYPES = {"format": int, "span": int, "k": int, "history": list, "fmu_digests": dict, "case_file": str,

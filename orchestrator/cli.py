@@ -103,7 +103,8 @@ def _add_watch_command(sub) -> None:
     watch = sub.add_parser("watch", help="follow a run's log as it is written: convergence, span force, newest "
                                          "values (a terminal view; Foxglove users: `run --live`)")
     watch.add_argument("folder", type=Path, help="run folder (the --out of `pantohil run`)")
-    watch.add_argument("--interval", type=float, default=0.5, metavar="S", help="seconds between reads (default 0.5)")
+    watch.add_argument("--interval", type=number(0.01, 60.0, unit="s"), default=0.5, metavar="S",
+                       help="seconds between reads (default 0.5)")
     watch.add_argument("--once", action="store_true", help="show what the log holds now and exit")
 
 
@@ -412,7 +413,7 @@ def _cmd_run(args, stop) -> int:
             case, resume = _resume_case(args)
             args.out = args.resume
         elif args.case is not None and args.case.suffix == ".ssp":
-            from pantohil.builder.ssp import SspError, read_ssp, temporary_dir
+            from pantohil.builder.ssp import SspError, read_ssp, ssp_case, temporary_dir
 
             if any(not o.startswith("run.") for o in args.overrides):
                 raise CaseError("--set: an SSP file fixes its system; only run.* keys can be overridden")
@@ -420,11 +421,11 @@ def _cmd_run(args, stop) -> int:
                 raise CaseError(f"SSP file {args.case} does not exist or is not a file")
             unpacked = temporary_dir("pantohil_ssp_")
             cleanup.callback(shutil.rmtree, unpacked, True)
-            try:
+            try:  # the case as the SSP's parameter values make it, validated as any case
                 system = read_ssp(args.case, unpacked)
+                case = ssp_case(args.case, system, args.overrides)
             except SspError as exc:
                 raise CaseError(str(exc)) from None
-            case = load_case(system["case_file"], args.overrides)
         else:
             case = load_case(args.case, args.overrides)
         checkpoint_info = None  # an SSP run saves no checkpoint: its system lives in a temporary folder
@@ -661,6 +662,10 @@ def _cmd_compare(args) -> int:
     from pantohil.orchestrator.fem_sim import compare_runs
 
     r = compare_runs(args.run_a, args.run_b, args.out)
+    if r["std_difference_pct"] is None:  # the second run's force does not vary: no % of its std
+        print(f"std {r['a']['std_N']:.2f} N ({r['a']['label']}) vs {r['b']['std_N']:.2f} N ({r['b']['label']}, "
+              f"constant); rms difference {r['rms_difference_N']:.2f} N")
+        return 0
     print(f"std {r['a']['std_N']:.2f} N ({r['a']['label']}) vs {r['b']['std_N']:.2f} N ({r['b']['label']}): "
           f"{r['std_difference_pct']:+.2f} %; rms difference {r['rms_difference_N']:.2f} N = "
           f"{r['rms_difference_pct_of_std_b']:.2f} % of the second std")

@@ -128,21 +128,41 @@ def _label(cat) -> str:
     return "benchmark-like (reconstructed)" if "benchmark" in text else cat.name
 
 
+def _summary_dt(s: dict, run: Path) -> float:
+    """A run summary's step dt_s, a finite number > 0 (CaseError naming the folder otherwise)."""
+    dt = s.get("dt_s")
+    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0 < dt < 1e3:
+        raise CaseError(f"run summary {run / 'summary.json'}: dt_s must be a positive number of seconds "
+                        f"(got {dt!r})")
+    return float(dt)
+
+
+def _force_table(run: Path, name: str, columns: int) -> np.ndarray:
+    """A run folder's force table with at least `columns` columns, two rows and finite numbers."""
+    d = read_table(run, name)
+    if d.shape[1] < columns or d.shape[0] < 2 or not np.all(np.isfinite(d)):
+        raise CaseError(f"run table {run / name}: expected at least 2 rows of {columns} finite numbers "
+                        f"(got {d.shape[0]} x {d.shape[1]})")
+    return d
+
+
 def span_force(run: Path) -> tuple[np.ndarray, float, str]:
     """One span of contact force of a run folder, 20 Hz low-passed: the converged span of a HIL run or
     the mean of the central spans of a fem-sim run."""
     run = Path(run)
     s = read_summary(run)
+    dt = _summary_dt(s, run)
     if (run / CENTRAL_SPANS).exists():
-        d = read_table(run, CENTRAL_SPANS)
-        dt = float(s["dt_s"])
+        d = _force_table(run, CENTRAL_SPANS, 4)
         spans = [int(j) for j in np.unique(d[:, 0])]
-        filt = np.stack([d[d[:, 0] == j, 3] for j in spans])
-        return filt.mean(axis=0), dt, f"fem-sim {s['n_spans']} spans (mean of spans {spans})"
+        blocks = [d[d[:, 0] == j, 3] for j in spans]
+        if len({len(b) for b in blocks}) != 1:
+            raise CaseError(f"run table {run / CENTRAL_SPANS}: its spans hold different numbers of samples")
+        return np.stack(blocks).mean(axis=0), dt, f"fem-sim {s.get('n_spans')} spans (mean of spans {spans})"
     if (run / STEADY_SPAN).exists():
-        d = read_table(run, STEADY_SPAN)
-        dt = float(s["dt_s"])
-        return lowpass_periodic(d[:, 3], dt, CUTOFF_HZ), dt, f"HIL {s['catenary']['model']} ({s['case']})"
+        d = _force_table(run, STEADY_SPAN, 4)
+        model = s.get("catenary", {}).get("model") if isinstance(s.get("catenary"), dict) else None
+        return lowpass_periodic(d[:, 3], dt, CUTOFF_HZ), dt, f"HIL {model} ({s.get('case')})"
     raise CaseError(f"{run}: neither steady_span.csv nor central_spans.csv")
 
 
@@ -160,6 +180,23 @@ def correction_measures(corrections: np.ndarray, dt_s: float) -> dict:
             "correction_impulse_Ns": (c.sum(axis=0) * dt_s).tolist()}
 
 
+def _percent_of(value: float, std_ref: float, reference: np.ndarray) -> float | None:
+    """value in % of the reference's std; None where that std is round-off of a constant force (no variation
+    to compare with: 1e-9 of its mean level, or of 1 N)."""
+    if std_ref <= 1e-9 * max(1.0, float(np.max(np.abs(reference)))):
+        return None
+    return 100 * value / std_ref
+
+
+def _dropper_tables(a: Path, b: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """Both runs' dropper correction tables, where both have one of the same shape."""
+    name = "dropper_corrections.csv"
+    if not ((a / name).exists() and (b / name).exists()):
+        return None
+    da, db = _force_table(a, name, 2), _force_table(b, name, 2)
+    return (da, db) if da.shape == db.shape else None
+
+
 def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
     """`pantohil compare`: the 20 Hz contact force of two run folders, their stds and RMS difference."""
     fa, dta, la = span_force(a)
@@ -173,25 +210,24 @@ def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
                         f"{len(fb)} of {dtb:g} s)")
     diff = fa - fb
     std_ref = float(np.std(fb))
+    rms = float(np.sqrt(np.mean(diff ** 2)))
     res = {"a": {"run": str(a), "label": la, **force_statistics(fa)},
            "b": {"run": str(b), "label": lb, **force_statistics(fb)},
-           "std_difference_pct": 100 * (float(np.std(fa)) - std_ref) / std_ref,
-           "rms_difference_N": float(np.sqrt(np.mean(diff ** 2))),
-           "rms_difference_pct_of_std_b": 100 * float(np.sqrt(np.mean(diff ** 2))) / std_ref,
+           "std_difference_pct": _percent_of(float(np.std(fa)) - std_ref, std_ref, fb),
+           "rms_difference_N": rms,
+           "rms_difference_pct_of_std_b": _percent_of(rms, std_ref, fb),
            "filter": f"zero-phase {CUTOFF_HZ:g} Hz low-pass"}
+    droppers = _dropper_tables(Path(a), Path(b))  # every input read before anything is written
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     report.plot_force_comparison(out_dir / "contact_force.png", dta, {la: fa, lb: fb},
                                  f"contact force, {CUTOFF_HZ:g} Hz: std {np.std(fa):.2f} vs {np.std(fb):.2f} N, "
                                  f"rms difference {res['rms_difference_N']:.2f} N")
-    ca, cb = (Path(r) / "dropper_corrections.csv" for r in (a, b))
-    if ca.exists() and cb.exists():
-        da = np.loadtxt(ca, delimiter=",", skiprows=1, ndmin=2)
-        db = np.loadtxt(cb, delimiter=",", skiprows=1, ndmin=2)
-        if da.shape == db.shape:
-            ma, mb = correction_measures(da[:, 1:], dta), correction_measures(db[:, 1:], dtb)
-            for key in ma:
-                res[f"dropper_{key}"] = {"a": ma[key], "b": mb[key]}
-            report.plot_dropper_comparison(out_dir / "dropper_corrections.png", da, db, la, lb)
+    if droppers is not None:
+        da, db = droppers
+        ma, mb = correction_measures(da[:, 1:], dta), correction_measures(db[:, 1:], dtb)
+        for key in ma:
+            res[f"dropper_{key}"] = {"a": ma[key], "b": mb[key]}
+        report.plot_dropper_comparison(out_dir / "dropper_corrections.png", da, db, la, lb)
     report.write_json_atomic(out_dir / "compare.json", res)
     return res

@@ -189,12 +189,21 @@ def delay_plan(case: Case, topology: Topology = VIRTUAL) -> dict:
         loop += case.values["link"]["pipeline_steps"]
     d = case.delay_steps(loop)
     if d >= case.samples_per_span:
-        raise CaseError(f"rig.delay_steps: the delay advance D = {d} steps (loop {loop} + rig "
-                        f"{case.rig_latency_steps()}) must be shorter than a span "
-                        f"({case.samples_per_span} steps)")
+        raise CaseError(_delay_refusal(case, loop, d, topology.name == HARDWARE.name))
     return {"delay_steps": d, "loop_latency_steps": loop, "rig_latency_steps": case.rig_latency_steps(),
             "rig_compensation": "response" if case.compensates_rig_response else "delay",
             "steady_state_period_spans": case.rig_period_spans()}
+
+
+def _delay_refusal(case: Case, loop: int, d: int, hardware: bool) -> str:
+    """Why the advance D does not fit in a span, blamed on the key that adds the most to it."""
+    rig = 0 if case.compensates_rig_response or not case.delay_compensation else case.rig_latency_steps()
+    hold = case.hold_steps if case.delay_compensation else 0
+    rig_key = "rig.file" if case.rig_spec is not None else "rig.delay_steps"
+    terms = {"link.pipeline_steps" if hardware else "the loop": loop, "hil.hold_steps": hold, rig_key: rig}
+    key = max(terms, key=terms.get)
+    return (f"{key}: the delay advance D = {d} steps (loop {loop} + hold {hold} + rig {rig}) must be shorter "
+            f"than a span ({case.samples_per_span} steps)")
 
 
 def run_topology(case: Case, options: RunOptions) -> Topology:

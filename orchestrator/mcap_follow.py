@@ -12,12 +12,19 @@ import json
 import struct
 from pathlib import Path
 
-from mcap.exceptions import EndOfFile, McapError
+from mcap.exceptions import EndOfFile
 from mcap.records import Channel, Chunk, Footer, Message, Metadata
 from mcap.stream_reader import StreamReader
 
+from pantohil.models.input_files import InputFileError, read_input_chunk
+
 MAGIC = b"\x89MCAP0\r\n"
 _HEADER = struct.Struct("<BQ")
+# A record (a chunk of at most CHUNK_BYTES, compressed) is far smaller than MAX_RECORD_BYTES. A growing file
+# may show a huge length for a while (the writer patches a record's length once it is written), so a length
+# is not refused by itself: a poll that reads a whole window of MAX_POLL_BYTES without one complete record is.
+MAX_RECORD_BYTES = 32 * 1024 * 1024
+MAX_POLL_BYTES = 2 * MAX_RECORD_BYTES  # read per poll: always room for one whole record
 
 
 class McapFollowError(ValueError):
@@ -37,6 +44,14 @@ def complete_records_end(data: bytes, start: int) -> tuple[int, bool]:
     return offset, footer
 
 
+def _message(data: bytes) -> dict:
+    """A logged message: a JSON object (its values are shown only where they are numbers)."""
+    msg = json.loads(data)
+    if not isinstance(msg, dict):
+        raise ValueError(f"a message is not a JSON object ({type(msg).__name__})")
+    return msg
+
+
 class McapFollower:
     """`poll()` -> [(topic, log_time_ns, decoded JSON message)] new since the last poll."""
 
@@ -51,9 +66,10 @@ class McapFollower:
         """The messages of the records completed since the last poll, as (topic, log time ns, JSON)."""
         if self.finished:
             return []
-        with open(self.path, "rb") as f:
-            f.seek(self.offset)
-            data = f.read()
+        try:  # a regular file only (not a FIFO or a device), a bounded read per poll
+            data = read_input_chunk(self.path, "run log", self.offset, MAX_POLL_BYTES)
+        except InputFileError as exc:
+            raise McapFollowError(str(exc)) from None
         start = 0
         if self.offset == 0:
             if len(data) < len(MAGIC):
@@ -62,6 +78,9 @@ class McapFollower:
                 raise McapFollowError(f"{self.path} is not an MCAP file")
             start = len(MAGIC)
         end, footer = complete_records_end(data, start)
+        if end == start and len(data) >= MAX_POLL_BYTES:  # a whole window without one complete record
+            raise McapFollowError(f"{self.path}: a record at byte {self.offset + start} is larger than the limit "
+                                  f"of {MAX_RECORD_BYTES} bytes")
         if end == start:
             self.offset += start
             return []
@@ -77,13 +96,14 @@ class McapFollower:
                 if isinstance(record, Channel):
                     self._topics[record.id] = record.topic
                 elif isinstance(record, Message) and record.channel_id in self._topics:
-                    out.append((self._topics[record.channel_id], record.log_time, json.loads(record.data)))
+                    out.append((self._topics[record.channel_id], record.log_time, _message(record.data)))
                 elif isinstance(record, Metadata) and record.name == "run":
                     self.metadata = dict(record.metadata)
                 elif isinstance(record, (Footer, Chunk)):
                     continue
         except EndOfFile:  # the stream of complete records ends without the file's closing magic
             pass
-        except McapError as exc:
-            raise McapFollowError(f"{self.path}: {exc}") from None
+        except Exception as exc:  # McapError, a decompressor's error, a bad struct or JSON: a damaged record
+            detail = " ".join(str(exc).split())[:200] or type(exc).__name__
+            raise McapFollowError(f"{self.path}: a record cannot be read ({detail})") from None
         return out

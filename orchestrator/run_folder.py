@@ -4,10 +4,11 @@ and span files."""
 from __future__ import annotations
 
 import fcntl
-import json
+import io
 import os
 import re
 import shutil
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from datetime import datetime
@@ -16,12 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.case import CaseError
+from pantohil.models.input_files import InputFileError, load_json, read_input_text
 
 LOCK_NAME = ".pantohil-run.lock"
 SUMMARY = "summary.json"
 STEADY_SPAN = "steady_span.csv"  # t_s, z0_m, z_m, f_N, x_m of the converged span (HIL runs)
 CENTRAL_SPANS = "central_spans.csv"  # span, t_s, f_N, f_lowpass_N of a fem-sim section
 RUNS_ROOT = Path("runs")
+MAX_SUMMARY_BYTES = 64 * 1024 * 1024  # a summary of 10000 spans is about 2 MB
+MAX_TABLE_BYTES = 256 * 1024 * 1024  # about 40 bytes a row: 6 million rows, 60 central spans of 100,000 samples
 
 
 class RunFolderError(CaseError):
@@ -111,16 +115,32 @@ def _release(folder: Path, fd: int) -> None:
 
 
 def read_summary(folder: Path) -> dict:
-    """The summary of a run folder; CaseError with one line if it has none or it is not JSON."""
+    """The summary of a run folder (a JSON object in a regular file, bounded); CaseError with one line if it
+    has none or it is not one."""
     path = Path(folder) / SUMMARY
-    if not path.exists():
+    if not path.exists() and not path.is_symlink():
         raise CaseError(f"{folder}: not a run folder (no {SUMMARY})")
     try:
-        return json.loads(path.read_text())
-    except ValueError as exc:
-        raise CaseError(f"{path}: not readable JSON ({exc})") from None
+        return load_json(path, "run summary", MAX_SUMMARY_BYTES)
+    except InputFileError as exc:
+        raise CaseError(str(exc)) from None
 
 
 def read_table(folder: Path, name: str) -> np.ndarray:
-    """A CSV file of a run folder (one header line) as a 2-D array."""
-    return np.loadtxt(Path(folder) / name, delimiter=",", skiprows=1, ndmin=2)
+    """A CSV file of a run folder (one header line) as a 2-D array of numbers; CaseError with one line if it
+    is not a regular file of at most MAX_TABLE_BYTES holding such a table."""
+    path = Path(folder) / name
+    try:
+        text = read_input_text(path, "run table", MAX_TABLE_BYTES)
+    except InputFileError as exc:
+        raise CaseError(str(exc)) from None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # an empty table is refused below, without numpy's warning
+            table = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1, ndmin=2)
+    except ValueError as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else "unreadable"
+        raise CaseError(f"run table {path} is not a table of numbers ({reason})") from None
+    if table.size == 0:
+        raise CaseError(f"run table {path} has no rows")
+    return table

@@ -9,9 +9,9 @@ On a terminal the view redraws in place (rich); otherwise it prints one line per
 from __future__ import annotations
 
 import fcntl
-import json
 import math
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -21,9 +21,10 @@ from rich.table import Table
 from rich.text import Text
 
 from pantohil.models.case import CaseError
+from pantohil.models.input_files import InputFileError, open_regular
 
 from .mcap_follow import McapFollower, McapFollowError
-from .run_folder import LOCK_NAME
+from .run_folder import LOCK_NAME, read_summary
 
 BARS = "▁▂▃▄▅▆▇█"
 SPARK_WIDTH = 60
@@ -55,15 +56,33 @@ class RunView:
     @property
     def simulated_s(self) -> float:
         """Simulated time of the newest per-step message read [s]."""
-        return max((m.get("t", 0.0) for m in self.latest.values()), default=0.0)
+        times = [m.get("t") for m in self.latest.values()]
+        return max((t for t in times if isinstance(t, (int, float)) and math.isfinite(t)), default=0.0)
+
+
+def _fmt(value, spec: str) -> str:
+    """A logged value as `spec` formats it; "-" for null, and "?" for anything that is not a finite number."""
+    if value is None:
+        return "-"
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return "?"
+    return format(value, spec)
+
+
+def _numbers(values) -> list[float] | None:
+    """A logged list of finite numbers, or None."""
+    if not isinstance(values, list) or not values:
+        return None
+    ok = all(not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+    return [float(v) for v in values] if ok else None
 
 
 def span_line(rec: dict) -> str:
     """One line for a closed span: its change, mean, std, max and min."""
-    change = rec.get("change")
-    change_s = "-" if change is None or not math.isfinite(change) else f"{change:.3e}"
-    return (f"span {rec['span']}: change {change_s}, mean {rec['mean_N']:.2f} N, std {rec['std_N']:.2f} N, "
-            f"max {rec['max_N']:.1f} N, min {rec['min_N']:.1f} N")
+    return (f"span {_fmt(rec.get('span'), 'd' if isinstance(rec.get('span'), int) else 'g')}: change "
+            f"{_fmt(rec.get('change'), '.3e')}, mean {_fmt(rec.get('mean_N'), '.2f')} N, std "
+            f"{_fmt(rec.get('std_N'), '.2f')} N, max {_fmt(rec.get('max_N'), '.1f')} N, min "
+            f"{_fmt(rec.get('min_N'), '.1f')} N")
 
 
 def sparkline(values: list[float], low: float, high: float, width: int = SPARK_WIDTH) -> str:
@@ -81,9 +100,8 @@ def _history_table(view: RunView) -> Table:
     for name in ("span", "change", "mean [N]", "std [N]", "max [N]", "min [N]"):
         table.add_column(name, justify="right")
     for rec in view.history[-HISTORY_ROWS:]:
-        change = rec.get("change")
-        table.add_row(str(rec["span"]), "-" if change is None else f"{change:.3e}", f"{rec['mean_N']:.2f}",
-                      f"{rec['std_N']:.2f}", f"{rec['max_N']:.1f}", f"{rec['min_N']:.1f}")
+        table.add_row(_fmt(rec.get("span"), "g"), _fmt(rec.get("change"), ".3e"), _fmt(rec.get("mean_N"), ".2f"),
+                      _fmt(rec.get("std_N"), ".2f"), _fmt(rec.get("max_N"), ".1f"), _fmt(rec.get("min_N"), ".1f"))
     return table
 
 
@@ -91,10 +109,12 @@ def _span_force_text(view: RunView) -> Text:
     sf = view.span_force
     if not sf:
         return Text("force of the span: after the first span")
-    current, previous = sf["force_N"], sf["previous_force_N"]
+    current, previous = _numbers(sf.get("force_N")), _numbers(sf.get("previous_force_N"))
+    if current is None or previous is None:
+        return Text("force of the span: not a list of numbers in the log")
     both = current + previous
     low, high = min(both), max(both)
-    text = Text(f"force of span {sf['span']} [{low:.0f} .. {high:.0f} N]\n")
+    text = Text(f"force of span {_fmt(sf.get('span'), 'g')} [{low:.0f} .. {high:.0f} N]\n")
     text.append("current  " + sparkline(current, low, high) + "\n", style="bold")
     text.append("previous " + sparkline(previous, low, high), style="dim")
     return text
@@ -107,7 +127,7 @@ def _latest_table(view: RunView) -> Table:
     for topic, msg in sorted(view.latest.items()):
         for name, value in msg.items():
             if name != "t":
-                table.add_row(f"{topic}.{name}", "null" if value is None else f"{value:.6g}")
+                table.add_row(f"{topic}.{name}", "null" if value is None else _fmt(value, ".6g"))
     return table
 
 
@@ -119,11 +139,32 @@ def render(view: RunView, folder: Path, status: str) -> Group:
     return Group(head, _history_table(view), _span_force_text(view), _latest_table(view))
 
 
+def _open_lock(folder: Path) -> int | None:
+    """A descriptor of the folder's lock file, or None if there is none (or it is not a regular file)."""
+    try:
+        return open_regular(folder / LOCK_NAME, "run lock")
+    except InputFileError:
+        return None
+
+
+def run_is_alive(folder: Path) -> bool:
+    """Whether a process holds the folder's run lock (a run killed without cleaning up holds none)."""
+    fd = _open_lock(folder)
+    if fd is None:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
 def wait_for_run_end(folder: Path) -> None:
     """Block until the run holding the folder's lock lets go of it (it writes summary.json first)."""
-    try:
-        fd = os.open(folder / LOCK_NAME, os.O_RDONLY)
-    except FileNotFoundError:  # no run holds the folder
+    fd = _open_lock(folder)
+    if fd is None:  # no run holds the folder
         return
     try:
         fcntl.flock(fd, fcntl.LOCK_SH)
@@ -132,14 +173,20 @@ def wait_for_run_end(folder: Path) -> None:
         os.close(fd)
 
 
+class RunGone(Exception):
+    """The run writing the folder ended without finishing its log or its summary (killed)."""
+
+
 def _final_status(folder: Path, finished: bool) -> str:
     summary = folder / "summary.json"
     if finished:
         wait_for_run_end(folder)
-    if not summary.exists():
-        return "log finished, no summary.json" if finished else "running"
-    s = json.loads(summary.read_text())
-    return f"{s['status']}: {s['message']}"
+    if not summary.exists() and not summary.is_symlink():
+        if finished:
+            raise RunGone(f"watch: the run in {folder} finished its log but wrote no summary.json: it was killed")
+        return "running"
+    s = read_summary(folder)
+    return f"{s.get('status', '?')}: {s.get('message', '')}"
 
 
 def log_path(folder: Path) -> Path:
@@ -148,14 +195,41 @@ def log_path(folder: Path) -> Path:
     return resumed[-1] if resumed else folder / "run.mcap"
 
 
+class Liveness:
+    """Whether the run writing a folder is still there: a process holds the lock that a run took (its lock
+    file is there, or was seen). Dead only at two checks in a row, so that a run taking or letting go of its
+    lock at that instant is not taken for a killed one."""
+
+    def __init__(self, folder: Path):
+        self.folder, self.lock_seen, self.misses = folder, False, 0
+
+    def dead(self, log_started: bool) -> bool:
+        """Check once; True at the second check in a row that finds no holder."""
+        self.lock_seen = self.lock_seen or (self.folder / LOCK_NAME).exists()
+        if not (self.lock_seen or log_started) or run_is_alive(self.folder):
+            self.misses = 0
+            return False
+        self.misses += 1
+        return self.misses >= 2
+
+
+def _gone(folder: Path) -> RunGone:
+    return RunGone(f"watch: the run writing {folder} is no longer running (no process holds its lock) and its "
+                   "log is unfinished: it was killed")
+
+
 def _follow(folder: Path, view: RunView, interval_s: float, on_change) -> bool:
-    """Poll the log until it is finished; `on_change(closed_spans)` after each poll with news."""
-    path = log_path(folder)
-    while not path.exists():
+    """Poll the log until it is finished; `on_change(closed_spans)` after each poll with news. RunGone when the
+    run stops holding the folder's lock before its log is finished."""
+    alive = Liveness(folder)
+    while not log_path(folder).exists():
+        if alive.dead(log_started=False):
+            raise _gone(folder)
         on_change([])
         time.sleep(interval_s)
-    follower = McapFollower(path)
+    follower = McapFollower(log_path(folder))
     while not follower.finished:
+        dead = alive.dead(log_started=True)  # before the poll: a run that finishes meanwhile is read finished
         try:
             messages = follower.poll()
         except McapFollowError as exc:
@@ -165,8 +239,23 @@ def _follow(folder: Path, view: RunView, interval_s: float, on_change) -> bool:
         if messages:
             on_change(closed)
         if not follower.finished:
+            if dead:
+                raise _gone(folder)
             time.sleep(interval_s)
     return True
+
+
+def _read_all(path: Path, view: RunView) -> McapFollower:
+    """Everything the log holds now, read in bounded polls."""
+    follower, offset = McapFollower(path), -1
+    while follower.offset != offset and not follower.finished:
+        offset = follower.offset
+        try:
+            view.update(follower.poll())
+        except McapFollowError as exc:
+            raise CaseError(f"watch: {exc}") from None
+    view.metadata = follower.metadata
+    return follower
 
 
 def watch(folder: Path, interval_s: float = 0.5, once: bool = False, console: Console | None = None) -> int:
@@ -175,20 +264,24 @@ def watch(folder: Path, interval_s: float = 0.5, once: bool = False, console: Co
     folder = Path(folder)
     if not folder.is_dir():
         raise CaseError(f"watch: {folder} is not a run folder (no such directory)")
-    if interval_s <= 0:
-        raise CaseError(f"watch: --interval must be > 0 s (got {interval_s:g})")
+    if not (math.isfinite(interval_s) and 0 < interval_s <= 3600):
+        raise CaseError(f"watch: --interval must be a number of seconds in (0, 3600] (got {interval_s!r})")
     view = RunView()
     if once:
         if not log_path(folder).exists():
             raise CaseError(f"watch: no run.mcap in {folder} yet")
-        follower = McapFollower(log_path(folder))
-        try:
-            view.update(follower.poll())
-        except McapFollowError as exc:
-            raise CaseError(f"watch: {exc}") from None
-        view.metadata = follower.metadata
+        follower = _read_all(log_path(folder), view)
         console.print(render(view, folder, _final_status(folder, False) if follower.finished else "running"))
         return 0
+    try:
+        return _watch_live(folder, view, interval_s, console)
+    except RunGone as exc:
+        print(f"pantohil: error: {exc}", file=sys.stderr, flush=True)
+        return 1
+
+
+def _watch_live(folder: Path, view: RunView, interval_s: float, console: Console) -> int:
+    """Follow the log to its end: a live view on a terminal, else a line per closed span."""
     if console.is_terminal:
         with Live(render(view, folder, "waiting for run.mcap"), console=console, refresh_per_second=4) as live:
             _follow(folder, view, interval_s, lambda closed: live.update(render(view, folder, "running")))

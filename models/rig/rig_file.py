@@ -10,6 +10,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..input_files import InputFileError, load_toml
+from ..parameters import MAX_SAMPLES_PER_SPAN
 from .actuator import ActuatorLimits
 from .drive_chain import ForcePath, HeightPath, MeasuredResponse, RigSpec
 
@@ -18,17 +19,28 @@ class RigFileError(ValueError):
     """A rig file that cannot be used; the message is one line naming the key."""
 
 
+# Bounds on what sets a run's work and memory, each as for the case's keys (models/parameters.py):
+MIN_STEP_S, MAX_STEP_S = 1e-5, 1.0  # the dt a HELLO may carry on the rig link
+MAX_DELAY_STEPS = MAX_SAMPLES_PER_SPAN  # a delay must be shorter than a span, and a span holds at most this many
+DELAY_RANGE = f"must lie in 0..{MAX_DELAY_STEPS} (a delay shorter than the longest span)"
+MAX_DECIMATION = 10_000  # as the case's rig.comm_decimation
+MAX_SUB_STEPS = 100  # drive sub-references per model step (Paper B's drive: 3.2); each costs a loop update
+MAX_RESPONSE_POINTS = 10_000  # measured frequencies (rig-identify writes one per kept harmonic)
+
 # section -> key -> (type, default, check, requirement, description [unit])
 SCHEMA = {
     "rig": {
         "name": (str, "unnamed", None, "", "rig name"),
         "description": (str, "", None, "", "free text"),
-        "model_step_s": (float, None, lambda x: x > 0, "must be > 0", "model step dt the rig runs at [s]"),
+        "model_step_s": (float, None, lambda x: MIN_STEP_S <= x <= MAX_STEP_S,
+                         f"must lie in [{MIN_STEP_S:g}, {MAX_STEP_S:g}] s (the rig link's range of dt)",
+                         "model step dt the rig runs at [s]"),
         "stated_delay_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "total delay the source states [s]"),
     },
     "height": {
-        "delay_steps": (int, 0, lambda x: x >= 0, "must be >= 0", "pure delay to the drive [steps]"),
-        "decimation": (int, 1, lambda x: x >= 1, "must be >= 1", "N_com: one height of every N_com sent [-]"),
+        "delay_steps": (int, 0, lambda x: 0 <= x <= MAX_DELAY_STEPS, DELAY_RANGE, "pure delay to the drive [steps]"),
+        "decimation": (int, 1, lambda x: 1 <= x <= MAX_DECIMATION, f"must lie in 1..{MAX_DECIMATION}",
+                       "N_com: one height of every N_com sent [-]"),
         "ramp_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "drive ramp, 0 = N_com dt [s]"),
         "sub_step_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "drive sub-reference period, 0 = none [s]"),
         "servo_frequency_hz": (
@@ -43,7 +55,7 @@ SCHEMA = {
     "force": {
         "filter_hz": (float, 0.0, lambda x: x >= 0, "must be >= 0", "amplifier low-pass cut-off, 0 = none [Hz]"),
         "filter_order": (int, 2, lambda x: 1 <= x <= 8, "must be 1 to 8", "Butterworth order [-]"),
-        "delay_steps": (int, 0, lambda x: x >= 0, "must be >= 0", "acquisition delay [steps]"),
+        "delay_steps": (int, 0, lambda x: 0 <= x <= MAX_DELAY_STEPS, DELAY_RANGE, "acquisition delay [steps]"),
     },
     "limits": {
         "stroke_min_m": (float, -0.12, None, "", "lowest actuator position [m]"),
@@ -120,6 +132,8 @@ def _measured(resp: dict) -> MeasuredResponse | None:
             f"response.{missing[0]}: missing (the response needs all of {', '.join(SCHEMA['response'])})"
         )
     n = len(given["frequencies_hz"])
+    if n > MAX_RESPONSE_POINTS:
+        raise RigFileError(f"response.frequencies_hz: {n} frequencies, above the limit of {MAX_RESPONSE_POINTS}")
     for key, vals in given.items():
         if len(vals) != n:
             raise RigFileError(f"response.{key}: {len(vals)} values for {n} frequencies")
@@ -145,6 +159,9 @@ def rig_from_dict(raw: dict) -> RigSpec:
     if not lim["stroke_min_m"] < lim["stroke_max_m"]:
         raise RigFileError(f"limits.stroke_max_m: must be above limits.stroke_min_m ({lim['stroke_min_m']:g} m)")
     dt = r["model_step_s"]
+    if 0 < h["sub_step_s"] < dt / MAX_SUB_STEPS:
+        raise RigFileError(f"height.sub_step_s: {h['sub_step_s']!r} s gives {dt / h['sub_step_s']:.3g} sub-steps per "
+                           f"model step (dt = {dt:g} s), above the limit of {MAX_SUB_STEPS}")
     if h["sub_step_s"] > dt * h["decimation"] + 1e-15 and h["sub_step_s"] > 0:
         raise RigFileError(f"height.sub_step_s: {h['sub_step_s']:g} s is longer than a reference period "
                            f"(N_com dt = {dt * h['decimation']:g} s)")

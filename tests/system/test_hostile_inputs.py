@@ -160,6 +160,18 @@ CASES = [
         ("pantograph.uplift_force_N", "expected a number"),
         (KC, KC + '\nuplift_force_N = "automatic"'),
     ),
+    # valid TOML that crashed every loader (issue 28, D10)
+    _case("case-deep-nesting", ("line 56", "nests deeper than 32"), append="x = " + "[" * 5000 + "]" * 5000 + "\n"),
+    _case("case-dotted-deep", ("nests deeper than 32",), append="[run.a]\n" + ".".join(["b"] * 100) + " = 1\n"),
+    _case("case-int-beyond-64-bits", ("catenary.tension_N", "64-bit range"), (TENSION, "tension_N = " + "9" * 400)),
+    _case("case-int-5000-digits", ("case file", "4300"), append="x = " + "9" * 5000 + "\n"),
+    _set("set-int-5000-digits", "run.max_spans=" + "9" * 5000, ("override", "4300")),
+    _case("case-nul-in-file-name", ("profile.csv_file", "NUL"),
+          ('source = "droppers"', 'source = "csv"\ncsv_file = "profile\\u0000.csv"')),
+    # refusals that name the right value and key (issue 28, D25)
+    _set("set-relaxation-digits", "hil.relaxation=1.0000000001", ("hil.relaxation", "1.0000000001 is outside")),
+    _set("set-hold-steps-blamed", "hil.hold_steps=100000", ("hil.hold_steps:", "hold 100000")),
+    Hostile("watch-interval-nan", ("watch", "{tmp}", "--interval", "nan"), ("--interval", "finite")),
     # structure
     Hostile("case-section-scalar", RUN, ("hil", "table"), case=SCALAR_HIL),
     _case("case-unknown-section", ("bogus", "unknown section"), append="[bogus]\nx = 1\n"),
@@ -218,6 +230,12 @@ CASES = [
             "dropper_positions_m = [4.5, 10.25, 16.0, 21.75, 27.5, 33.25, 39.0, 44.75, 50.5]",
             f"dropper_positions_m = [{', '.join(f'{0.01 * (i + 1):.2f}' for i in range(200))}]",
         ),
+    ),
+    _cat(
+        "catenary-elements-per-span",
+        ("catenary.span_m / catenary.mesh_size_m", "limit of 1000", "GiB"),
+        ("span_m = 55.0", "span_m = 1000.0"),
+        ("mesh_size_m = 0.25", "mesh_size_m = 0.5"),
     ),
     _cat(
         "catenary-missing-section",

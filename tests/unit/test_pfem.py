@@ -127,6 +127,26 @@ def test_operator_files_round_trip_and_refuse_bad_files(tmp_path):
             load_operators(tmp_path / "bad.npz")
 
 
+def test_an_operator_file_header_claiming_a_huge_shape_is_refused_before_allocating(tmp_path):
+    """Issue 28, D09: a header claiming (1e6, 1e6) asked for 7.28 TiB; each header is checked against the bytes
+    of its member and the shape the settings give before any array is read."""
+    import zipfile
+
+    path = tmp_path / "ops.npz"
+    save_operators(_small_operators(), path, "k" * 24)
+    with zipfile.ZipFile(path) as zin, zipfile.ZipFile(tmp_path / "forged.npz", "w") as out:
+        for info in zin.infolist():
+            data = zin.read(info)
+            if info.filename in ("cc.npy", "dd.npy"):
+                data = data.replace(b"(100, ", b"(1000000, ", 1)
+            out.writestr(info.filename, data)
+    with pytest.raises(OperatorFileError, match="header .* does not match its"):
+        load_operators(tmp_path / "forged.npz")
+    for special in ("/dev/zero", str(tmp_path)):
+        with pytest.raises(OperatorFileError, match="not a regular file|is a directory"):
+            load_operators(special)
+
+
 def test_an_interrupted_build_leaves_no_cache_entry(tmp_path, monkeypatch):
     from pantohil.builder import operators as ob
     from pantohil.models.case import load_case

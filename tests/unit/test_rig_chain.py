@@ -99,13 +99,19 @@ def test_compensation_inverts_the_gains():
 
 
 @pytest.mark.parametrize("patch,message", [
-    ({"height": {"decimation": 0}}, "height.decimation: must be >= 1"),
+    ({"height": {"decimation": 0}}, "height.decimation: must lie in 1..10000"),
     ({"height": {"ramp": 1.0}}, "height.ramp: unknown key"),
     ({"force": {"filter_hz": 600.0}}, "force.filter_hz: 600 Hz is at or above the Nyquist"),
     ({"height": {"ramp_s": 0.02}}, "height.ramp_s: 0.02 s is longer than a reference period"),
     ({"limits": {"stroke_min_m": 0.2}}, "limits.stroke_max_m: must be above"),
     ({"response": {"frequencies_hz": [1.0]}}, "response.height_gain: missing"),
     ({"wiring": {}}, "wiring: unknown section"),
+    # sizes that set a run's work and memory (issue 28, D09)
+    ({"height": {"sub_step_s": 1e-9}}, "height.sub_step_s: 1e-09 s gives 1e+06 sub-steps per model step"),
+    ({"height": {"delay_steps": 2_000_000_000}}, "height.delay_steps: must lie in 0..100000"),
+    ({"force": {"delay_steps": 100_001}}, "force.delay_steps: must lie in 0..100000"),
+    ({"height": {"decimation": 10_001}}, "height.decimation: must lie in 1..10000"),
+    ({"rig": {"model_step_s": 1e-9}}, "rig.model_step_s: must lie in [1e-05, 1] s"),
 ])
 def test_bad_rig_files(patch, message):
     raw = {"rig": {"name": "x", "model_step_s": 0.001}, "height": {"decimation": 8}}

@@ -13,10 +13,11 @@ import numpy as np
 from pantohil.models.catenary.asm.string import AsmParameters
 from pantohil.models.catenary.fe.asm_fit import (attenuation, dominant_wavelength, fit_density, is_propagating,
     support_stiffness_from)
-from pantohil.models.catenary.fe.definition import CatenaryDefinition, load_definition
+from pantohil.models.catenary.fe.definition import CatenaryDefinition, CatenaryError, load_definition
 from pantohil.models.catenary.asm.closed_form import one_sided_harmonics
 from pantohil.models.catenary.fe.model import contact_wire_profile, form_find, harmonic_responses, vertical_stiffness
-from pantohil.models.storage import cache_root, write_text_atomic
+from pantohil.models.input_files import InputFileError, read_input_bytes, read_input_text
+from pantohil.models.storage import cache_folder, cache_root, write_text_atomic
 
 FIT_BANDS_HZ = ((5.0, 20.0), (10.0, 20.0), (10.0, 40.0))
 ANALYSIS_VERSION = 2
@@ -140,14 +141,18 @@ def cached_analysis(path: Path) -> CatenaryAnalysis:
     """The analysis of a catenary file, from the cache when the file has not changed (atomic writes)."""
     path = Path(path)
     cat = load_definition(path)
-    key = hashlib.sha256(f"{ANALYSIS_VERSION}".encode() + path.read_bytes()).hexdigest()[:20]
+    try:
+        data = read_input_bytes(path, "catenary file")  # the bytes whose analysis is cached, read as checked
+    except InputFileError as exc:
+        raise CatenaryError(str(exc)) from None
+    key = hashlib.sha256(f"{ANALYSIS_VERSION}".encode() + data).hexdigest()[:20]
     entry = cache_dir() / f"{key}.json"
     if entry.exists():
-        try:
-            return CatenaryAnalysis(**json.loads(entry.read_text()))
-        except (ValueError, TypeError):
-            pass  # unreadable entry: recompute and replace it
+        try:  # a regular file of bounded size (a FIFO or a device planted in the cache does not hang)
+            return CatenaryAnalysis(**json.loads(read_input_text(entry, "catenary cache entry")))
+        except (ValueError, TypeError):  # InputFileError included: an unreadable entry is recomputed and replaced
+            pass
     result = analyse(cat)
-    entry.parent.mkdir(parents=True, exist_ok=True)
+    cache_folder(entry.parent)
     write_text_atomic(entry, json.dumps(result.__dict__))
     return result

@@ -100,6 +100,20 @@ UPPER_BOUNDS = {
 }
 MIN_MESH_SIZE_M = 0.05
 MAX_DROPPERS = 100
+# Elements of a wire in one span (span_m / mesh_size_m). The static stiffness solve of the analysis holds a
+# dense block of (4 dofs x 5 spans x E) x E float64 numbers, twice: 0.3 GiB at the limit, 120 GiB at the
+# documented extremes (a 1000 m span in 0.05 m elements); the shipped catenaries have 220 and 260.
+MAX_ELEMENTS_PER_SPAN = 1000
+
+
+def _check_elements(span: float, mesh: float) -> None:
+    """Refuse a span whose mesh would need more memory than MAX_ELEMENTS_PER_SPAN allows (one line)."""
+    elements = span / mesh
+    if elements > MAX_ELEMENTS_PER_SPAN:
+        gib = 2 * 8 * (4 * 5 * elements) * elements / 2**30
+        raise CatenaryError(f"catenary.span_m / catenary.mesh_size_m: {span:g} m in elements of {mesh:g} m is "
+                            f"{elements:.0f} elements per span, above the limit of {MAX_ELEMENTS_PER_SPAN} "
+                            f"(the stiffness solve would take {gib:.1f} GiB)")
 
 
 def _num(section: dict, sec: str, key: str, default=None, positive=False, nonneg=False) -> float:
@@ -227,6 +241,7 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
     mesh = _num(c, "catenary", "mesh_size_m", 0.25, positive=True)
     if mesh < MIN_MESH_SIZE_M:
         raise CatenaryError(f"catenary.mesh_size_m: {mesh:g} m is below the limit of {MIN_MESH_SIZE_M:g} m")
+    _check_elements(span, mesh)
     if mesh > min(np.diff((0.0, *positions, span))):
         raise CatenaryError(f"catenary.mesh_size_m: {mesh:g} m is longer than the shortest dropper interval")
     return CatenaryDefinition(
