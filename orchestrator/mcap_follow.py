@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import struct
 from pathlib import Path
 
 from mcap.exceptions import EndOfFile
-from mcap.records import Channel, Chunk, Footer, Message, Metadata
+from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from pantohil.models.input_files import InputFileError, read_input_chunk
@@ -25,6 +26,7 @@ _HEADER = struct.Struct("<BQ")
 # is not refused by itself: a poll that reads a whole window of MAX_POLL_BYTES without one complete record is.
 MAX_RECORD_BYTES = 32 * 1024 * 1024
 MAX_POLL_BYTES = 2 * MAX_RECORD_BYTES  # read per poll: always room for one whole record
+_UNIT = re.compile(r"\[([^\]]*)\]\s*$")
 
 
 class McapFollowError(ValueError):
@@ -52,6 +54,20 @@ def _message(data: bytes) -> dict:
     return msg
 
 
+def schema_units(data: bytes) -> dict[str, str]:
+    """Field -> unit of a channel's JSON schema, from each description's closing `[unit]` ("[-]": none)."""
+    try:
+        properties = json.loads(data).get("properties", {})
+    except (ValueError, AttributeError):
+        return {}
+    units = {}
+    for name, spec in properties.items() if isinstance(properties, dict) else ():
+        found = _UNIT.search(str(spec.get("description", ""))) if isinstance(spec, dict) else None
+        if found and found.group(1) != "-":
+            units[name] = found.group(1)
+    return units
+
+
 class McapFollower:
     """`poll()` -> [(topic, log_time_ns, decoded JSON message)] new since the last poll."""
 
@@ -60,7 +76,9 @@ class McapFollower:
         self.offset = 0
         self.finished = False
         self.metadata: dict[str, str] = {}
+        self.units: dict[str, dict[str, str]] = {}  # topic -> field -> unit, from the channels' JSON schemas
         self._topics: dict[int, str] = {}
+        self._schemas: dict[int, bytes] = {}
 
     def poll(self) -> list[tuple[str, int, dict]]:
         """The messages of the records completed since the last poll, as (topic, log time ns, JSON)."""
@@ -93,8 +111,11 @@ class McapFollower:
         out = []
         try:
             for record in StreamReader(io.BytesIO(records), skip_magic=True).records:
-                if isinstance(record, Channel):
+                if isinstance(record, Schema):
+                    self._schemas[record.id] = record.data
+                elif isinstance(record, Channel):
                     self._topics[record.id] = record.topic
+                    self.units[record.topic] = schema_units(self._schemas.get(record.schema_id, b""))
                 elif isinstance(record, Message) and record.channel_id in self._topics:
                     out.append((self._topics[record.channel_id], record.log_time, _message(record.data)))
                 elif isinstance(record, Metadata) and record.name == "run":

@@ -29,6 +29,7 @@ from .run_folder import LOCK_NAME, read_summary
 BARS = "▁▂▃▄▅▆▇█"
 SPARK_WIDTH = 60
 HISTORY_ROWS = 8
+WAIT_FOR_FOLDER_S = 60.0  # a watch started before its run waits this long for the run folder
 
 
 class RunView:
@@ -39,6 +40,7 @@ class RunView:
         self.latest: dict[str, dict] = {}
         self.span_force: dict | None = None
         self.metadata: dict[str, str] = {}
+        self.units: dict[str, dict[str, str]] = {}  # topic -> signal -> unit (from the log's schemas)
 
     def update(self, messages) -> list[dict]:
         """Take new messages; return the spans closed among them."""
@@ -124,10 +126,12 @@ def _latest_table(view: RunView) -> Table:
     table = Table(title=f"newest step (t = {view.simulated_s:.3f} s)", expand=False)
     table.add_column("signal")
     table.add_column("value", justify="right")
+    table.add_column("unit")
     for topic, msg in sorted(view.latest.items()):
+        units = view.units.get(topic, {})
         for name, value in msg.items():
             if name != "t":
-                table.add_row(f"{topic}.{name}", "null" if value is None else _fmt(value, ".6g"))
+                table.add_row(f"{topic}.{name}", "null" if value is None else _fmt(value, ".6g"), units.get(name, ""))
     return table
 
 
@@ -235,6 +239,7 @@ def _follow(folder: Path, view: RunView, interval_s: float, on_change) -> bool:
         except McapFollowError as exc:
             raise CaseError(f"watch: {exc}") from None
         view.metadata = follower.metadata or view.metadata
+        view.units = follower.units or view.units
         closed = view.update(messages)
         if messages:
             on_change(closed)
@@ -255,6 +260,7 @@ def _read_all(path: Path, view: RunView) -> McapFollower:
         except McapFollowError as exc:
             raise CaseError(f"watch: {exc}") from None
     view.metadata = follower.metadata
+    view.units = follower.units
     return follower
 
 
@@ -262,10 +268,12 @@ def watch(folder: Path, interval_s: float = 0.5, once: bool = False, console: Co
     """Follow a run folder's log until the run ends (or, with `once`, show what is there now)."""
     console = console or Console()
     folder = Path(folder)
-    if not folder.is_dir():
-        raise CaseError(f"watch: {folder} is not a run folder (no such directory)")
     if not (math.isfinite(interval_s) and 0 < interval_s <= 3600):
         raise CaseError(f"watch: --interval must be a number of seconds in (0, 3600] (got {interval_s!r})")
+    if not once:
+        _wait_for_folder(folder, interval_s)
+    if not folder.is_dir():
+        raise CaseError(f"watch: {folder} is not a run folder (no such directory)")
     view = RunView()
     if once:
         if not log_path(folder).exists():
@@ -278,6 +286,16 @@ def watch(folder: Path, interval_s: float = 0.5, once: bool = False, console: Co
     except RunGone as exc:
         print(f"pantohil: error: {exc}", file=sys.stderr, flush=True)
         return 1
+
+
+def _wait_for_folder(folder: Path, interval_s: float) -> None:
+    """A watch started before its run: wait up to WAIT_FOR_FOLDER_S for the run to make its folder."""
+    deadline = time.monotonic() + WAIT_FOR_FOLDER_S
+    if not folder.exists():
+        print(f"watch: waiting up to {WAIT_FOR_FOLDER_S:g} s for {folder} (a run about to start)", file=sys.stderr,
+              flush=True)
+    while not folder.exists() and time.monotonic() < deadline:
+        time.sleep(min(interval_s, 0.5))
 
 
 def _watch_live(folder: Path, view: RunView, interval_s: float, console: Console) -> int:

@@ -74,9 +74,25 @@ def test_watch_follows_a_run_to_its_end(tmp_path):
 
 
 def test_watch_bad_folder_is_one_line_and_exit_2(tmp_path):
-    for args in ([str(tmp_path / "missing")], [str(tmp_path), "--once"], [str(tmp_path), "--interval", "0"]):
+    for args in ([str(tmp_path / "missing"), "--once"], [str(tmp_path), "--once"], [str(tmp_path), "--interval", "0"]):
         proc = pantohil("watch", *args)
         assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "watch:" in proc.stderr, proc.stderr
     (tmp_path / "run.mcap").write_bytes(b"not an mcap file at all")
     proc = pantohil("watch", str(tmp_path))
     assert proc.returncode == 2 and "not an MCAP file" in proc.stderr
+
+
+@pytest.mark.slow
+def test_watch_started_before_its_run_waits_for_it_and_shows_units(tmp_path):
+    out = tmp_path / "later"
+    watcher = subprocess.Popen([sys.executable, "-m", "pantohil.orchestrator.cli", "watch", str(out),
+                                "--interval", "0.1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert "waiting up to 60 s" in watcher.stderr.readline()  # it is waiting: now the run starts
+    run = pantohil("run", "--out", str(out), "--quiet", "--engine", "inprocess", "--set", "run.max_spans=3")
+    assert run.returncode == 1, run.stderr
+    lines, err = watcher.communicate(timeout=600)
+    assert watcher.returncode == 0, err
+    assert lines.splitlines()[-1].startswith("span_limit: ")
+    once = pantohil("watch", str(out), "--once")
+    rows = {ln.split("│")[1].strip(): ln.split("│")[3].strip() for ln in once.stdout.splitlines() if ln.count("│") == 4}
+    assert rows["/catenary.height_command"] == "m" and rows["/pantograph.contact_force"] == "N", once.stdout
