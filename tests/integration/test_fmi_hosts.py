@@ -122,7 +122,10 @@ def test_c_host_names_numpy_when_the_python_lacks_it(host, default_run, tmp_path
     fmus = {name: default_run / "fmus" / f"{name}.fmu" for name in FMU_NAMES}
     plan = _plan(fmus, tmp_path, 1, 1)
     env = {k: v for k, v in os.environ.items() if k not in PYTHON_VARIABLES}
-    env.update(PANTOHIL_LIBPYTHON=str(SYSTEM_LIBPYTHON), PYTHONHOME="/usr", PYTHONPATH=str(tmp_path / "empty"))
+    # PATH without the test's own environment: an embedded Python that finds a virtual environment's
+    # python3 on PATH takes that environment's site-packages (its pyvenv.cfg), numpy included
+    env.update(PANTOHIL_LIBPYTHON=str(SYSTEM_LIBPYTHON), PYTHONHOME="/usr", PYTHONPATH=str(tmp_path / "empty"),
+               PATH=os.defpath)
     proc = subprocess.run([str(host), str(plan)], env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode != 0
     assert "No module named 'numpy'" in proc.stdout
