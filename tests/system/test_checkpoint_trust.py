@@ -191,3 +191,64 @@ def test_a_run_resumes_after_the_fmu_cache_was_emptied(tmp_path):
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((folder / "summary.json").read_text())
     assert summary["status"] == "converged" and summary["resumed_from_span"] >= 2
+
+
+def _main(argv) -> tuple[int, str]:
+    """The CLI's main in this process: its exit code and stderr."""
+    import contextlib
+
+    from pantohil.orchestrator.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        try:
+            code = main(argv)
+        except SystemExit as exc:
+            code = exc.code
+    return code, err.getvalue()
+
+
+HOSTILE_VALUES = (None, [], {}, "x", -1, 2 ** 70, 1.5, True, [[[[]]]], {"$o": "os:system"}, "\0")
+TYPED_KEYS = ("format", "span", "k", "history", "fmu_digests", "case_file", "overrides")
+
+
+def _mutants(folder, rng):
+    """Seeded hostile checkpoints: bytes of checkpoint.npz flipped or cut, and checkpoint.json's typed entries
+    given values of other types."""
+    arrays = (folder / STATE / "checkpoint.npz").read_bytes()
+    meta = json.loads((folder / STATE / "checkpoint.json").read_text())
+    for _ in range(12):
+        data = bytearray(arrays)
+        for _ in range(rng.randint(1, 8)):
+            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+        yield "npz bits flipped", "checkpoint.npz", bytes(data)
+    for _ in range(6):
+        yield "npz cut", "checkpoint.npz", arrays[:rng.randrange(len(arrays))]
+    for _ in range(16):
+        key, value = rng.choice(TYPED_KEYS), rng.choice(HOSTILE_VALUES)
+        if type(value) is type(meta[key]) and not isinstance(value, bool):
+            continue
+        yield f"json {key}={value!r}", "checkpoint.json", json.dumps({**meta, key: value}).encode()
+    yield "json not an object", "checkpoint.json", b"[1, 2, 3]"
+    yield "json nested", "checkpoint.json", b"[" * 100_000 + b"]" * 100_000
+    yield "json binary", "checkpoint.json", bytes(rng.randrange(256) for _ in range(200))
+
+
+@pytest.mark.slow
+def test_fuzzed_checkpoints_are_refused_in_one_line(interrupted, tmp_path):
+    import random
+
+    rng = random.Random(28)
+    folder = _copy(interrupted, tmp_path / "fuzzed")
+    originals = {name: (folder / STATE / name).read_bytes() for name in ("checkpoint.npz", "checkpoint.json")}
+    before = _folder_digest(folder)
+    tried = 0
+    for what, name, data in _mutants(folder, rng):
+        (folder / STATE / name).write_bytes(data)
+        code, err = _main(["run", "--resume", str(folder), "--quiet"])
+        (folder / STATE / name).write_bytes(originals[name])
+        lines = err.strip().splitlines()
+        assert code == 2 and len(lines) == 1 and "Traceback" not in err, f"{what}: exit {code}: {err[-1500:]}"
+        assert _folder_digest(folder) == before, f"{what}: the folder changed"
+        tried += 1
+    assert tried >= 30
