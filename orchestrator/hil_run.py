@@ -132,6 +132,7 @@ class PreparedRun:
     operators: dict | None
     fmus: dict = field(default_factory=dict)
     connections: tuple = ()
+    ssp: dict | None = None  # an SSP run: whether the archive's FMUs contain what the ones built here do
     parameters: dict = field(default_factory=dict)
     build_s: float = 0.0
 
@@ -338,12 +339,25 @@ def prepare(prepared: PreparedRun) -> None:
                                         prepared.topology.fmus, options.hardware or ("127.0.0.1", 47800))
         prepared.connections = prepared.topology.connections
         prepared.parameters = {"catenary": {"delay_steps": plan["delay_steps"]}}
-    else:
-        prepared.fmus = options.system["fmus"]
-        prepared.connections = options.system["connections"]
+    else:  # an SSP file: nothing in it is executed; its system is rebuilt from the case its values make
         prepared.parameters = options.system["parameters"]
         plan["delay_steps"] = prepared.parameters.get("catenary", {}).get("delay_steps", plan["delay_steps"])
+        prepared.fmus, prepared.ssp = _ssp_fmus(prepared)
+        prepared.connections = prepared.topology.connections
     prepared.build_s = time.perf_counter() - t_build
+
+
+def _ssp_fmus(prepared: PreparedRun) -> tuple[dict[str, Path], dict]:
+    """The FMUs of an SSP run: pantohil's own, built from the case the SSP's values make, never the archive's
+    (an input file's code is not run); the SSP must wire them as pantohil's virtual HIL does. Also whether the
+    archive's FMUs contain the same (an SSP of this pantohil and case) or not."""
+    system, topology = prepared.options.system, prepared.topology
+    if set(system["fmus"]) != set(topology.fmus) or set(system["connections"]) != set(topology.connections):
+        raise CaseError("SSP file: its components or connections are not those of pantohil's virtual HIL "
+                        f"({', '.join(topology.fmus)})")
+    built = build_case_fmus(prepared.case, prepared.out_dir / "fmus", prepared.plan["delay_steps"], topology.fmus)
+    same = checkpoint.fmu_digests(built) == checkpoint.fmu_digests(system["fmus"])
+    return built, {"archive_fmus_run": False, "archive_fmus_same_contents": same}
 
 
 def _resumed_fmus(prepared: PreparedRun) -> dict[str, Path]:

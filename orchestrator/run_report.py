@@ -158,6 +158,6 @@ def summarise_run(state) -> RunSummary:
         convergence=history, stop_signal=signal_name, operators=prepared.operators, realtime=state.realtime,
         link=state.link, live=state.live,
         resumed_from_span=state.first_span if prepared.options.resume is not None else None,
-        engine=prepared.options.engine, **sections)
+        engine=prepared.options.engine, ssp=prepared.ssp, **sections)
     report.write_json_atomic(prepared.out_dir / "summary.json", summary.to_dict())
     return summary

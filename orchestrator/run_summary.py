@@ -87,6 +87,7 @@ class RunSummary:
     link: dict | None = None
     live: dict | None = None
     resumed_from_span: int | None = None
+    ssp: dict | None = None  # an SSP run: its FMUs are built here; whether the archive's have the same contents
     engine: str = "fmu"  # "inprocess": stepped without the FMUs (pantohil run --engine)
     contact_force: ForceStatistics | None = None
     reference: dict | None = None

@@ -78,3 +78,24 @@ def test_a_run_of_an_ssp_leaves_no_temporary_folder(ssp, tmp_path):
     assert proc.returncode == 1 and "span_limit" in proc.stdout, proc.stderr
     assert (tmp_path / "run" / "summary.json").exists()
     assert list((tmp_path / "tmp").iterdir()) == []
+
+
+@pytest.mark.slow
+def test_code_in_an_ssp_is_never_run(ssp, tmp_path):
+    # the catenary FMU of the archive gets a slave script that would leave a marker when imported
+    marker = tmp_path / "PWNED"
+    with zipfile.ZipFile(ssp) as z:
+        inner = z.read("resources/catenary.fmu")
+    inner_path = tmp_path / "catenary.fmu"
+    inner_path.write_bytes(inner)
+    with zipfile.ZipFile(inner_path) as z:
+        script = next(n for n in z.namelist() if n.endswith("pantohil_catenary.py"))
+        code = z.read(script).decode()
+    crafted = _rewrite(inner_path, tmp_path / "crafted.fmu",
+                       {script: f"open({str(marker)!r}, 'w').close()\n{code}".encode()})
+    bad = _rewrite(ssp, tmp_path / "crafted.ssp", {"resources/catenary.fmu": crafted.read_bytes()})
+    proc = _run([str(bad), "--set", "run.max_spans=1", "--out", str(tmp_path / "run")], tmp_path / "tmp")
+    assert proc.returncode == 1, proc.stderr
+    assert not marker.exists()
+    summary = __import__("json").loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["ssp"] == {"archive_fmus_run": False, "archive_fmus_same_contents": False}
