@@ -128,6 +128,21 @@ def _final_status(state) -> tuple[str, str, str | None]:
                            f"{state.message}"), stop.signal_name
 
 
+def _reported_span(state, spans_done: int) -> int | None:
+    """The span whose force the summary reports: the last one, or on a rig the last one whose forces were all
+    measured (a span the rig did not answer holds the span before's forces: it shows nothing measured), if the
+    master still holds it; None if there is none."""
+    if spans_done < 1:
+        return None
+    history = state.monitor.history if state.monitor is not None else []
+    n = state.case.samples_per_span
+    whole = [h["span"] for h in history if h.get("measured", n) == n and h["span"] < spans_done]
+    if state.prepared.options.hardware is None or not history:
+        return spans_done - 1
+    oldest = (state.master.k - state.master.capacity) // n if state.master is not None else 0
+    return whole[-1] if whole and whole[-1] >= max(oldest, 0) else None
+
+
 def summarise_run(state) -> RunSummary:
     """Write the run folder's files, summary.json last and atomically, and return the summary."""
     case, prepared, master = state.case, state.prepared, state.master
@@ -139,7 +154,8 @@ def summarise_run(state) -> RunSummary:
 
     k = master.k if master is not None else 0
     spans_done = k // n
-    sections = _last_span(state, spans_done, plots) if spans_done >= 1 else {}
+    reported = _reported_span(state, spans_done)
+    sections = _last_span(state, reported + 1, plots) if reported is not None else {}
     history = state.monitor.history if state.monitor is not None else []
     if history and plots():
         report.plot_convergence(prepared.out_dir / "convergence.png", history, case.values["run"]["convergence_tol"],
@@ -158,6 +174,6 @@ def summarise_run(state) -> RunSummary:
         convergence=history, stop_signal=signal_name, operators=prepared.operators, realtime=state.realtime,
         link=state.link, live=state.live,
         resumed_from_span=state.first_span if prepared.options.resume is not None else None,
-        engine=prepared.options.engine, ssp=prepared.ssp, **sections)
+        engine=prepared.options.engine, ssp=prepared.ssp, reported_span=reported, **sections)
     report.write_json_atomic(prepared.out_dir / "summary.json", summary.to_dict())
     return summary

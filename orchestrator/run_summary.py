@@ -88,6 +88,7 @@ class RunSummary:
     live: dict | None = None
     resumed_from_span: int | None = None
     ssp: dict | None = None  # an SSP run: its FMUs are built here; whether the archive's have the same contents
+    reported_span: int | None = None  # the span contact_force and steady_span.csv hold (on a rig: measured whole)
     engine: str = "fmu"  # "inprocess": stepped without the FMUs (pantohil run --engine)
     contact_force: ForceStatistics | None = None
     reference: dict | None = None

@@ -195,6 +195,10 @@ def test_a_dead_rig_is_never_converged_whatever_the_tolerated_losses(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "link_lost" and not summary["converged"]
     assert "data failed" in stderr and "were measured" in stderr
+    # the force it reports is of a span the rig answered whole, not the kept forces of the dead rig's span
+    n = summary["samples_per_span"]
+    assert summary["convergence"][-1]["measured"] < n / 2
+    assert summary["convergence"][summary["reported_span"]]["measured"] == n
 
 
 @pytest.mark.parametrize("command", ["emulator", "run"])
