@@ -144,18 +144,24 @@ slave.instantiate()
 slave.setupExperiment(startTime=0.0)
 slave.enterInitializationMode()
 slave.exitInitializationMode()
-status = slave._functions["fmi2DoStep"](slave.component, 0.0, 2 * float(md.defaultExperiment.stepSize), 1)
+dt = float(md.defaultExperiment.stepSize)
+do_step = slave._functions["fmi2DoStep"]
+rounded = [do_step(slave.component, k * dt, dt * (1 + 5.3e-7), 1) for k in range(3)]  # a master's rounding
+remainder = do_step(slave.component, 3 * dt, 1.5e-11, 1)  # to a stop time between two steps
+print("rounded", *rounded, "remainder", remainder, flush=True)
+status = do_step(slave.component, 3 * dt, 2 * dt, 1)
 print("status", status, flush=True)
 """
 
 
 @pytest.mark.slow
-def test_fmpy_gets_an_error_and_a_message_for_a_wrong_step(default_run):
+def test_fmpy_gets_an_error_for_a_wrong_step_and_ok_for_rounding_and_a_last_remainder(default_run):
     for name in FMU_NAMES:
         proc = subprocess.run([sys.executable, "-c", WRONG_STEP_IN_FMPY, str(default_run / "fmus" / f"{name}.fmu")],
                               capture_output=True, text=True, timeout=600)
         assert "status 3" in proc.stdout and proc.returncode == 0, proc.stdout + proc.stderr  # fmi2Error, clean exit
         assert "this FMU takes only its fixed step of 0.001 s" in proc.stdout
+        assert "rounded 0 0 0 remainder 0" in proc.stdout, proc.stdout  # fmi2OK: taken as dt, and with no step
 
 
 SIMULATE_ALONE = """
