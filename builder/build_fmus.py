@@ -40,7 +40,7 @@ MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}
 CLASS_NAMES = {"catenary": "PantohilCatenary", "rig": "PantohilRig", "pantograph": "PantohilPantograph",
                "adapter": "PantohilAdapter"}
-SUPPORT_MODULES = ("__init__.py", "fmu_support.py", "udp_protocol.py")
+SUPPORT_MODULES = ("__init__.py", "fmu_support.py", "state_codec.py", "udp_protocol.py")
 
 
 def fmu_parameters(case: Case, delay_steps: int,

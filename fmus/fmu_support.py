@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import operator
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,6 +103,8 @@ def load_parameters(resources: str | None) -> dict:
 def register_all(slave, variables: list[Var]) -> None:
     """Set each variable's attribute (case value or start) and register it with pythonfmu."""
     given = load_parameters(slave.resources)
+    slave._declared = {v.name: v for v in variables if v.causality == "parameter"}
+    slave._built = given
     for var in variables:
         value = given.get(var.name, var.start) if var.causality == "parameter" else var.start
         if not isinstance(getattr(type(slave), var.name, None), property):  # a property computes its value
@@ -123,7 +126,7 @@ def register_all(slave, variables: list[Var]) -> None:
 # Attributes of every pythonfmu slave that describe the instance, not the simulation
 _INSTANCE_ATTRIBUTES = frozenset({"vars", "log_queue", "instance_name", "resources", "visible", "guid", "author",
                                   "license", "version", "copyright", "modelName", "description",
-                                  "default_experiment"})
+                                  "default_experiment", "_declared", "_built"})
 
 
 class StateError(ValueError):
@@ -195,6 +198,24 @@ class PantohilSlave(Fmi2Slave):
     case. pythonfmu calls the (de)serialization hooks on the class, hence the static methods."""
 
     transient: tuple[str, ...] = ()
+    structural: tuple[str, ...] = ()  # parameters the built resources depend on: fixed at the built values
+
+    def check_parameters(self) -> None:
+        """At the end of initialisation, before anything is built: every parameter a finite number within its
+        declared range, and every structural one at the value the FMU was built with (a master that sets the
+        speed of a built operator would get wrong physics). ValueError naming the parameter: the host logs it
+        and the initialisation fails."""
+        for name, var in getattr(self, "_declared", {}).items():
+            value = getattr(self, name)
+            number = var.kind in ("real", "integer")
+            if number and (not math.isfinite(value) or (var.min is not None and value < var.min)
+                           or (var.max is not None and value > var.max)):
+                raise ValueError(f"{type(self).__name__}: parameter {name} = {value!r} is outside its range "
+                                     f"[{var.min}, {var.max}]")
+            if name in self.structural and name in self._built and value != type(value)(self._built[name]):
+                raise ValueError(f"{type(self).__name__}: parameter {name} = {value!r} differs from the "
+                                 f"{self._built[name]!r} this FMU was built with, and its built resources depend "
+                                 "on it: build the FMU for the new value (pantohil build)")
 
     def get_real(self, vrs):
         """fmi2GetReal: the values and errors of pythonfmu's, read by attribute name without its

@@ -147,6 +147,7 @@ class PantohilAdapter(PantohilSlave):
 
     def exit_initialization_mode(self):
         """Open the link: the limiter at the starting height, the socket, HELLO until the rig answers STATUS."""
+        self.check_parameters()
         limits = ActuatorLimits(**{f.name: getattr(self, f.name) for f in dataclasses.fields(ActuatorLimits)})
         self._limiter = Limiter(limits, self.time_step, self.height_command)
         self.command_sent = self._limiter.z
@@ -288,7 +289,8 @@ class PantohilAdapter(PantohilSlave):
             return True
         msg = self._early.pop(awaited, None)
         if msg is None:
-            timeout = self.receive_timeout_s if self.received else max(self.receive_timeout_s, FIRST_ANSWER_TIMEOUT_S)
+            first = awaited == 1 and self.session_started  # a rig's first step may be slow
+            timeout = max(self.receive_timeout_s, FIRST_ANSWER_TIMEOUT_S) if first else self.receive_timeout_s
             msg = self._receive(time.perf_counter() + timeout, lambda m: m.type == proto.FORCE and m.seq == awaited)
             if msg is not None and self._early:  # it came after a later answer: a reordering
                 self.reordered += 1

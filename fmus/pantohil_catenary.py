@@ -121,8 +121,17 @@ class PantohilCatenary(PantohilSlave):
             return {}
         return {"profile": self._z0, **{f"hil.{a}": getattr(self._hil, a) for a in self._hil.CONSTANT_ATTRIBUTES}}
 
+    @property
+    def structural(self) -> tuple[str, ...]:
+        """The parameters the built resources depend on: the sample grid and the profile (both models), the
+        rig's response file, and for the PFEM every catenary key (its operators are built from them)."""
+        grid = ("speed", "time_step", "samples_per_span", "span_m", "catenary_model", "max_frequency_hz",
+                "rig_compensation")
+        return grid + ASM_FIELDS if self._built.get("catenary_model") == 1 else grid
+
     def exit_initialization_mode(self):
         """Build the operator (ASM2 from its parameters, or the PFEM operators in the resources) and the iteration."""
+        self.check_parameters()
         n = int(self.samples_per_span)
         self.harmonics = harmonic_count(self.max_frequency_hz, n, self.time_step)
         settings = HilSettings(update=UPDATES[self.hil_update], relaxation=self.relaxation,

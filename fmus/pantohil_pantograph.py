@@ -29,6 +29,8 @@ class PantohilPantograph(PantohilSlave):
     author = "pantohil"
     description = "Lumped pantograph (Paper A Table A.3 chain, HHT alpha=-0.05) with penalty contact and contact loss."
 
+    structural = ("time_step",)  # the integration step is the communication step the loader enforces
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         register_all(self, VARIABLES)
@@ -41,6 +43,7 @@ class PantohilPantograph(PantohilSlave):
 
     def exit_initialization_mode(self):
         """Build the pantograph from its parameters and settle it at the actuator's starting height."""
+        self.check_parameters()
         n = int(self.n_masses) if self.pantograph_model == 0 else 1
         def pick(stem):
             return tuple(float(getattr(self, f"{stem}_{i}")) for i in range(1, n + 1))

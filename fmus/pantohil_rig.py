@@ -34,6 +34,8 @@ class PantohilRig(PantohilSlave):
         "HIL rig between model and pantograph: delay, N_com decimation with linear drive ramp, servo, load cell."
     )
 
+    structural = ("time_step", "rig_chain")  # a rig file's chain counts its delays in steps of the built dt
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         register_all(self, VARIABLES)
@@ -49,6 +51,7 @@ class PantohilRig(PantohilSlave):
 
     def exit_initialization_mode(self):
         """Build the rig at its starting height and force, and output its latency in steps."""
+        self.check_parameters()
         if self.rig_chain == 1:
             spec = load_rig_file(Path(self.resources) / RIG_FILE)
             self._rig = RigChain(spec, self.time_step, self.height_command, self.true_force, self.force_offset_N,
