@@ -783,8 +783,7 @@ def _guarded(handler, args) -> int:
         print(f"pantohil: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as exc:  # the output mechanisms have removed what they had not finished
-        print(f"pantohil: {args.command} interrupted by {_signal_name(signal_of(exc))}; no output written",
-              file=sys.stderr)
+        print(f"pantohil: {args.command} interrupted by {_signal_name(signal_of(exc))}", file=sys.stderr)
         return exit_code(signal_of(exc))
     except Exception as exc:  # an FMU or master failure: one line, the run folder keeps what was written
         code = _failure_code(exc)

@@ -23,12 +23,12 @@ from .stopping import shielded
 
 PART_PATTERN = re.compile(r"^\.(?P<name>.+)\.(?:part|old)-(?P<pid>\d+)$")
 NO_ROOM = {errno.ENOSPC: "the disk is full", errno.EFBIG: "a file size limit was reached",
-           errno.EDQUOT: "the disk quota is used up"}
+           errno.EDQUOT: "the disk quota is used up", errno.EIO: "the disk failed"}
 
 
 def write_failure(exc: BaseException) -> str | None:
-    """One line for a write that failed for lack of room (ENOSPC, EFBIG, EDQUOT, anywhere in the chain of
-    causes); None for any other error."""
+    """One line for a write that failed for lack of room or a failing disk (ENOSPC, EFBIG, EDQUOT, EIO,
+    anywhere in the chain of causes); None for any other error."""
     seen = exc
     while seen is not None:
         if isinstance(seen, OSError) and seen.errno in NO_ROOM:

@@ -13,6 +13,7 @@ import fcntl
 import logging
 import multiprocessing as mp
 import os
+import resource
 import signal
 from pathlib import Path
 
@@ -123,6 +124,7 @@ def _detach_from_parent(parent_pid: int) -> None:
     and is told by the kernel when its parent dies, even by SIGKILL."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)  # a closed terminal: the parent stops, then closes the file
     signal.signal(PARENT_GONE_SIGNAL, _on_parent_gone)
     with contextlib.suppress(OSError, AttributeError):  # not Linux: the pipe's end of file still tells
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(PARENT_GONE_SIGNAL), 0, 0, 0)
@@ -171,13 +173,16 @@ def _writer_process(conn, send_end, parent_pid: int, path: str, groups: dict, me
 
 
 def _write_error(path: Path) -> OSError:
-    """The error of a writer process that could not write `path`: no room left on its disk, or another."""
-    try:
+    """The error of a writer process that could not write `path` (foxglove-sdk does not say which): the
+    file size limit reached (EFBIG), no room left on its disk (ENOSPC), else an I/O error."""
+    code = errno.EIO
+    with contextlib.suppress(OSError):
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
         st = os.statvfs(path.parent)
-        full = st.f_bavail * st.f_frsize < 2 * CHUNK_BYTES
-    except OSError:
-        full = False
-    code = errno.ENOSPC if full else errno.EIO
+        if limit != resource.RLIM_INFINITY and path.stat().st_size + 2 * CHUNK_BYTES >= limit:
+            code = errno.EFBIG
+        elif st.f_bavail * st.f_frsize < 2 * CHUNK_BYTES:
+            code = errno.ENOSPC
     return OSError(code, f"{os.strerror(code)}; {path.name} holds its complete chunks", str(path))
 
 
@@ -234,6 +239,10 @@ class McapRecorder:
             self._send.send(("close",))
         self._send.close()
         self._proc.join(timeout_s)
+        if self._proc.is_alive():  # never left behind: it would hold the file open
+            self._proc.kill()
+            self._proc.join()
+            raise RuntimeError(f"MCAP writer process did not finish {self._path.name} within {timeout_s:g} s")
         if self._proc.exitcode == WRITE_FAILED:
             raise _write_error(self._path)
         if self._proc.exitcode not in (0, None):

@@ -337,12 +337,12 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
             rows.append(row)
             _write_results(out, rows, columns)
 
-        interrupted = False
+        interrupted = None
         try:
             keys = [f"sweep-{definition['hash']}-{p['id']}-{os.getpid()}" for p in todo]
             run_tasks(client, sweep_point, tasks, keys, keep, progress, desc=definition["name"])
-        except KeyboardInterrupt:
-            interrupted = True
+        except KeyboardInterrupt as exc:  # kept, with its signal, for after the results are written
+            interrupted = exc
         wall = time.perf_counter() - t0
     if rows:
         _write_results(out, rows, columns)
@@ -352,10 +352,10 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
                "point_plots": definition["point_plots"],
                "points": len(points), "skipped_done": len(done), "ran": len(rows) - len(done), "statuses": statuses,
                "workers": n_workers, "scheduler": scheduler or "LocalCluster", "wall_s": wall,
-               "interrupted": interrupted, "figures": figures}
+               "interrupted": interrupted is not None, "figures": figures}
     write_json_atomic(out / "summary.json", summary)
-    if interrupted:
-        raise KeyboardInterrupt
+    if interrupted is not None:
+        raise interrupted
     return summary
 
 
