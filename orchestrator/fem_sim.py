@@ -10,7 +10,7 @@ from pantohil.models.catenary.fe.definition import load_definition
 from pantohil.models.metrics import LOWPASS_CUTOFF_HZ, lowpass, lowpass_periodic
 
 from . import report
-from .output_paths import atomic_output_folder
+from .output_paths import atomic_output_folder, check_output_folder
 from .recorder import McapWriter
 from .run_folder import CENTRAL_SPANS, STEADY_SPAN, read_summary, read_table
 
@@ -186,6 +186,7 @@ def correction_measures(corrections: np.ndarray, dt_s: float) -> dict:
 def compare_runs(a: Path, b: Path, out_dir: Path, overwrite: bool = False) -> dict:
     """`pantohil compare`: the 20 Hz contact force of two run folders, their stds and RMS difference; the
     folder out_dir appears complete or not at all (`overwrite` replaces a used one)."""
+    check_output_folder(out_dir, "--out", overwrite)  # before reading the runs
     fa, dta, la = span_force(a)
     fb, dtb, lb = span_force(b)
     if len(fa) != len(fb) or abs(dta - dtb) > 1e-12:

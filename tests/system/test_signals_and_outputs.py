@@ -154,6 +154,8 @@ FOLDER_COMMANDS = {
     "build": lambda out: ["build", "--out", out],
     "fem-sim": lambda out: ["fem-sim", str(FEM_CASE), "--spans", "6", "--central", "2", "--out", out, "--quiet"],
     "stability": lambda out: ["stability", "--out", out, "--quiet"],
+    "compare": lambda out: ["compare", "run_a", "run_b", "--out", out],
+    "package": lambda out: ["package", "--out", out, "--quiet"],
 }
 FILE_COMMANDS = {
     "direct": lambda out: ["direct", "--out", out],
