@@ -207,25 +207,25 @@ class McapRecorder:
         self.messages = 0
         self._closed = False
 
-    def _post(self, msg: tuple) -> None:
-        """Send one message whole: a stop signal waits for its end (half a message would leave the writer
-        waiting for the rest, and this process waiting for the writer). A writer that stopped: its error."""
+    def _post(self, msg: tuple, messages: int) -> None:
+        """Send one message whole, and count its `messages`: a stop signal waits for its end (half a message
+        would leave the writer waiting for the rest, and this process waiting for the writer). A writer
+        that stopped: its error."""
         try:
             with shielded():
                 self._send.send(msg)
+                self.messages += messages
         except (BrokenPipeError, ConnectionResetError):
             self._proc.join(10)
             raise _write_error(self._path) from None
 
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
         """Send a block of per-step rows of a topic to the logger process."""
-        self._post(("block", topic, np.asarray(t), np.asarray(columns)))
-        self.messages += len(t)
+        self._post(("block", topic, np.asarray(t), np.asarray(columns)), len(t))
 
     def write_event(self, topic: str, t: float, record: dict) -> None:
         """Send one JSON message of a topic to the logger process."""
-        self._post(("event", topic, t, record))
-        self.messages += 1
+        self._post(("event", topic, t, record), 1)
 
     def flush(self) -> None:
         """Nothing to do: the logger process flushes after every message it writes."""
