@@ -79,7 +79,8 @@ def check_output_folder(path: Path, option: str, overwrite: bool = False, keep_i
             return path
         if not overwrite:
             what = "holds a finished run" if (path / SUMMARY).exists() else "exists and is not empty"
-            raise RunFolderError(f"{option} {path}: {what} (--overwrite replaces it whole)")
+            remedy = "--overwrite replaces it whole" if keep_if is None else f"it holds no {keep_if}: use a new folder"
+            raise RunFolderError(f"{option} {path}: {what} ({remedy})")
     return path
 
 
