@@ -762,14 +762,21 @@ def main(argv: list[str] | None = None) -> int:
     SIGINT, SIGTERM and SIGHUP end every command the same way: one line, exit 128 + the signal; a run
     ends at a step boundary with a complete record, any other command at once, leaving no output half
     written (orchestrator/stopping.py)."""
+    from pantohil.models.scratch import process_scratch
     from pantohil.orchestrator.stopping import stop_on_signals
 
-    with stop_on_signals(raising=True) as stop:
-        args = _parser().parse_args(argv)
-        if args.command == "run":  # a stop signal ends the run at a step boundary with a complete record
-            stop.defer()
-            return _guarded(lambda a: _cmd_run(a, stop), args)
-        return _guarded(globals()[COMMAND_HANDLERS[args.command]], args)
+    # every temporary file of the command (FMU builds, extracted FMUs, unpacked SSP files) in one folder of
+    # this process: removed at its exit, or by the next command if this one is killed
+    previous, tempfile.tempdir = tempfile.tempdir, str(process_scratch())
+    try:
+        with stop_on_signals(raising=True) as stop:
+            args = _parser().parse_args(argv)
+            if args.command == "run":  # a stop signal ends the run at a step boundary with a complete record
+                stop.defer()
+                return _guarded(lambda a: _cmd_run(a, stop), args)
+            return _guarded(globals()[COMMAND_HANDLERS[args.command]], args)
+    finally:
+        tempfile.tempdir = previous
 
 
 def _guarded(handler, args) -> int:
