@@ -624,7 +624,7 @@ def _cmd_package(args) -> int:
     try:
         out = make_package(case, args.out, args.overrides, progress=not args.quiet)
     except KeyboardInterrupt as exc:
-        print("interrupted: no package written", file=sys.stderr)
+        print(f"pantohil: package {_interrupted_by(exc)}: no package written", file=sys.stderr)
         return _interrupt_code(exc)
     if args.zip:
         archive = shutil.make_archive(str(out), "zip", root_dir=out.parent, base_dir=out.name)
@@ -703,7 +703,7 @@ def _cmd_stability(args) -> int:
                           args.relaxation, args.scheduler, args.workers, progress=not args.quiet,
                           overwrite=args.overwrite)
     except KeyboardInterrupt as exc:
-        print("interrupted: no map written", file=sys.stderr)
+        print(f"pantohil: stability {_interrupted_by(exc)}: no map written", file=sys.stderr)
         return _interrupt_code(exc)
     except RuntimeError as exc:  # rows that failed on a worker: the others are in stability.csv
         print(f"pantohil: error: {exc}", file=sys.stderr)
@@ -723,8 +723,8 @@ def _cmd_sweep(args) -> int:
         s = run_sweep(args.file, args.out, args.scheduler, args.workers, progress=not args.quiet,
                       engine=args.engine, point_plots=True if args.point_plots else None)
     except KeyboardInterrupt as exc:
-        print(f"interrupted: the points done so far are in {args.out / 'results.csv'}; run the same command again "
-              "to run the others", file=sys.stderr)
+        print(f"pantohil: sweep {_interrupted_by(exc)}: the points done so far are in {args.out / 'results.csv'}; "
+              "run the same command again to run the others", file=sys.stderr)
         return _interrupt_code(exc)
     print(f"{s['name']}: {s['points']} points ({s['skipped_done']} already done, {s['ran']} run): "
           + ", ".join(f"{k} {v}" for k, v in sorted(s["statuses"].items())) + f"; {s['wall_s']:.1f} s on "
@@ -782,16 +782,14 @@ def main(argv: list[str] | None = None) -> int:
 def _guarded(handler, args) -> int:
     """Bad input: one line and exit 2; an FMU failure or a failed write: one line and exit 1; a stop
     signal: one line and exit 128 + the signal."""
-    from pantohil.orchestrator.stopping import exit_code, signal_of
-
     try:
         return handler(args)
     except (CaseError, CatenaryError, ProfileError, InputFileError) as exc:
         print(f"pantohil: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as exc:  # the output mechanisms have removed what they had not finished
-        print(f"pantohil: {args.command} interrupted by {_signal_name(signal_of(exc))}", file=sys.stderr)
-        return exit_code(signal_of(exc))
+        print(f"pantohil: {args.command} {_interrupted_by(exc)}", file=sys.stderr)
+        return _interrupt_code(exc)
     except Exception as exc:  # an FMU or master failure: one line, the run folder keeps what was written
         code = _failure_code(exc)
         if code is None:
@@ -806,8 +804,10 @@ def _interrupt_code(exc: BaseException) -> int:
     return exit_code(signal_of(exc))
 
 
-def _signal_name(signum: int) -> str:
-    return signal.Signals(signum).name
+def _interrupted_by(exc: BaseException) -> str:
+    from pantohil.orchestrator.stopping import signal_of
+
+    return f"interrupted by {signal.Signals(signal_of(exc)).name}"
 
 
 def _failure_code(exc: Exception) -> int | None:
