@@ -18,6 +18,7 @@ from pantohil.models.catenary.fe.definition import load_definition  # noqa: E402
 from pantohil.models.catenary.fe.model import form_find  # noqa: E402
 from pantohil.models.storage import atomic_path, write_text_atomic
 
+from .output_paths import atomic_output_folder  # noqa: E402
 from .report import save_figure  # noqa: E402
 
 
@@ -85,14 +86,20 @@ def _stiffness_plot(path: Path, a: CatenaryAnalysis) -> None:
     save_figure(fig, path)
 
 
-def catenary_report(path: Path, out_dir: Path) -> dict:
-    """`pantohil catenary`: analyse a catenary file and write catenary.json, CSV files and plots to out_dir."""
+def catenary_report(path: Path, out_dir: Path, overwrite: bool = False) -> dict:
+    """`pantohil catenary`: analyse a catenary file and write catenary.json, CSV files and plots to out_dir
+    (checked first; it appears complete or not at all; `overwrite` replaces a used one)."""
     t0 = time.perf_counter()
     cat = load_definition(path)
-    a = analyse(cat)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    summary = {**a.summary(), "source": str(path), "elapsed_s": time.perf_counter() - t0}
+    with atomic_output_folder(out_dir, "--out", overwrite) as part:
+        a = analyse(cat)
+        summary = {**a.summary(), "source": str(path), "elapsed_s": time.perf_counter() - t0}
+        _write_report(part, cat, a, summary)
+    return summary
+
+
+def _write_report(out_dir: Path, cat, a, summary: dict) -> None:
+    """The files of `pantohil catenary`, catenary.json last."""
     _write_csv(
         out_dir / "profile.csv",
         ["x_m", "z0_m"],
@@ -109,4 +116,3 @@ def catenary_report(path: Path, out_dir: Path) -> dict:
     _geometry_plot(out_dir / "geometry.png", cat, form_find(cat, 3))
     _stiffness_plot(out_dir / "stiffness.png", a)
     write_text_atomic(out_dir / "catenary.json", json.dumps(summary, indent=2) + "\n")
-    return summary

@@ -1,14 +1,14 @@
 """The `pantohil` command line.
 
 Exit codes: 0 success; 1 a run that did not converge (diverged, reached its span limit or lost
-contact); 2 bad input (one line naming the key); 3 a lost hardware link; 130 / 143 a run stopped by
-SIGINT / SIGTERM (its folder complete, status `interrupted`).
+contact), an FMU failure or a failed write (a full disk); 2 bad input (one line naming the key); 3 a
+lost hardware link; 130 / 143 / 129 a command stopped by SIGINT / SIGTERM / SIGHUP (a run's folder
+complete, status `interrupted`; any other command's output not written).
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import shutil
 import signal
@@ -55,6 +55,10 @@ def number(low: float | None = None, high: float | None = None, integer: bool = 
 
     parse.__name__ = "integer" if integer else "number"
     return parse
+
+
+def _add_overwrite(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--overwrite", action="store_true", help="replace --out whole if it is not empty")
 
 
 def _add_case_args(p: argparse.ArgumentParser, optional: bool) -> None:
@@ -177,7 +181,9 @@ def _add_catenary_command(sub) -> None:
     catenary.add_argument(
         "file", type=Path, help="catenary definition (TOML), e.g. models/data/catenaries/paper_a_stitched.toml"
     )
-    catenary.add_argument("--out", type=Path, required=True, help="folder for catenary.json, CSV files and plots")
+    catenary.add_argument("--out", type=Path, required=True,
+                          help="folder for catenary.json, CSV files and plots (new or empty)")
+    _add_overwrite(catenary)
 
 
 def _add_build_command(sub) -> None:
@@ -185,7 +191,8 @@ def _add_build_command(sub) -> None:
     build = sub.add_parser("build", help="build and validate the four FMUs of a case (catenary, rig, pantograph, "
                                          "hardware adapter); optionally an SSP file of the virtual HIL system")
     _add_case_args(build, optional=True)
-    build.add_argument("--out", type=Path, help="folder for the FMUs")
+    build.add_argument("--out", type=Path, help="folder for the FMUs (new or empty)")
+    _add_overwrite(build)
     build.add_argument("--ssp", type=Path, metavar="FILE.ssp",
                        help="also write the whole system as an SSP file, with an OSP system structure next to it")
 
@@ -216,7 +223,8 @@ def _add_fem_sim_command(sub) -> None:
         default=3,
         help="central spans whose statistics are reported (default 3)",
     )
-    fem.add_argument("--out", type=Path, required=True, help="run folder")
+    fem.add_argument("--out", type=Path, required=True, help="run folder (new or empty)")
+    _add_overwrite(fem)
     fem.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -225,7 +233,8 @@ def _add_compare_command(sub) -> None:
     compare = sub.add_parser("compare", help="contact force of two run folders overlaid (HIL or fem-sim), 20 Hz")
     compare.add_argument("run_a", type=Path)
     compare.add_argument("run_b", type=Path)
-    compare.add_argument("--out", type=Path, required=True, help="folder for compare.json and plots")
+    compare.add_argument("--out", type=Path, required=True, help="folder for compare.json and plots (new or empty)")
+    _add_overwrite(compare)
 
 
 def _add_stability_command(sub) -> None:
@@ -244,7 +253,9 @@ def _add_stability_command(sub) -> None:
     stab.add_argument("--delay", metavar="A:B:N", help="loop delay D [steps], compensated in full; with a rig "
                       "file, the advance D with the rig's chain in the loop (default: the case's latency and advance)")
     stab.add_argument("--relaxation", type=number(0.0, 2.0), help="fix mu_c instead of searching the best one")
-    stab.add_argument("--out", type=Path, required=True, help="folder for stability.csv, maps and summary.json")
+    stab.add_argument("--out", type=Path, required=True,
+                      help="folder for stability.csv, maps and summary.json (new or empty)")
+    _add_overwrite(stab)
     stab.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: a LocalCluster)")
     stab.add_argument(
         "--workers", type=number(1, MAX_WORKERS, integer=True), help="LocalCluster worker processes (default: 2)"
@@ -286,7 +297,8 @@ def _add_example_command(sub) -> None:
     example = sub.add_parser("example", help="reproduce a worked example of the thesis")
     example.add_argument("name", choices=["paper-c-appendix"],
                          help="paper-c-appendix: the academic periodic string of Paper C, Appendix A")
-    example.add_argument("--out", type=Path, required=True, help="folder for summary.json and a plot")
+    example.add_argument("--out", type=Path, required=True, help="folder for summary.json and a plot (new or empty)")
+    _add_overwrite(example)
 
 
 def _add_direct_command(sub) -> None:
@@ -478,8 +490,8 @@ def _cmd_watch(args) -> int:
 
     try:
         return watch(args.folder, args.interval, args.once)
-    except KeyboardInterrupt:
-        return 130
+    except KeyboardInterrupt as exc:
+        return _interrupt_code(exc)
 
 
 def _rig_file_arg(path: Path | None, option: str = "--rig"):
@@ -500,6 +512,10 @@ def _cmd_emulator(args) -> int:
 
     case = load_case(args.case, args.overrides)
     rig = _rig_file_arg(args.rig)
+    if args.stats is not None:  # written at the end of every session: checked before the first
+        from pantohil.orchestrator.output_paths import check_output_file
+
+        check_output_file(args.stats, "--stats")
     try:
         listen = parse_endpoint(args.listen, listening=True)
         faults = Faults(args.loss, args.reorder, args.duplicate, args.corrupt, args.delay_us, args.seed)
@@ -548,33 +564,52 @@ def _cmd_identify(args) -> int:
 
 
 def _cmd_build(args) -> int:
-    from fmpy.validation import validate_fmu
-
     from pantohil.builder.build_fmus import build_case_fmus
-    from pantohil.builder.system import FMU_NAMES
     from pantohil.orchestrator.hil_run import delay_plan
+    from pantohil.orchestrator.output_paths import atomic_output_folder, check_output_file
 
     case = load_case(args.case, args.overrides)
     if args.out is None and args.ssp is None:
         raise CaseError("build: give --out DIR, --ssp FILE.ssp, or both")
+    if args.ssp is not None:
+        check_output_file(args.ssp, "--ssp")
     plan = delay_plan(case)
-    with tempfile.TemporaryDirectory(prefix="pantohil_build_") as tmp:
-        names = ("catenary", "rig", "pantograph", "adapter") if args.out is not None else FMU_NAMES
-        fmus = build_case_fmus(case, args.out or Path(tmp), plan["delay_steps"], names)
-        bad = 0
-        for path in fmus.values():
-            problems = validate_fmu(str(path))
-            bad += len(problems)
-            if args.out is not None:
-                print(f"{path}: {'valid' if not problems else '; '.join(problems)}")
-        if args.ssp is not None:
-            from pantohil.orchestrator.package import make_ssp
+    with contextlib.ExitStack() as stack:
+        if args.out is not None:
+            names = ("catenary", "rig", "pantograph", "adapter")
+            folder = stack.enter_context(atomic_output_folder(args.out, "--out", args.overwrite))
+        else:
+            from pantohil.builder.system import FMU_NAMES
 
-            in_ssp = {n: fmus[n] for n in FMU_NAMES}  # the virtual HIL: the adapter is for rigs
-            ssp = make_ssp(case, in_ssp, args.ssp, args.overrides)
-            print(f"{ssp}: SSP of {len(in_ssp)} FMUs ({', '.join(in_ssp)}); OSP system structure in "
-                  f"{ssp.parent / (ssp.stem + '_osp')}")
+            names, folder = FMU_NAMES, Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="pantohil_build_")))
+        fmus = build_case_fmus(case, folder, plan["delay_steps"], names)
+        bad = _validate_built(fmus, args.out)
+        if args.ssp is not None:
+            _write_ssp(case, fmus, args)
     return 1 if bad else 0
+
+
+def _validate_built(fmus: dict, out: Path | None) -> int:
+    """fmpy's validation of the built FMUs (printed under their final names with --out); problems found."""
+    from fmpy.validation import validate_fmu
+
+    bad = 0
+    for path in fmus.values():
+        problems = validate_fmu(str(path))
+        bad += len(problems)
+        if out is not None:
+            print(f"{out / Path(path).name}: {'valid' if not problems else '; '.join(problems)}")
+    return bad
+
+
+def _write_ssp(case, fmus: dict, args) -> None:
+    from pantohil.builder.system import FMU_NAMES
+    from pantohil.orchestrator.package import make_ssp
+
+    in_ssp = {n: fmus[n] for n in FMU_NAMES}  # the virtual HIL: the adapter is for rigs
+    ssp = make_ssp(case, in_ssp, args.ssp, args.overrides)
+    print(f"{ssp}: SSP of {len(in_ssp)} FMUs ({', '.join(in_ssp)}); OSP system structure in "
+          f"{ssp.parent / (ssp.stem + '_osp')}")
 
 
 def _cmd_catenary(args) -> int:
@@ -582,7 +617,7 @@ def _cmd_catenary(args) -> int:
     from pantohil.orchestrator.catenary_report import catenary_report
 
     try:
-        s = catenary_report(catalog.resolve(args.file, "catenary"), args.out)
+        s = catenary_report(catalog.resolve(args.file, "catenary"), args.out, args.overwrite)
     except CatenaryError as exc:
         raise CaseError(str(exc)) from None
     fit = s["asm_fit"]
@@ -605,9 +640,9 @@ def _cmd_package(args) -> int:
     case = load_case(args.case, args.overrides)
     try:
         out = make_package(case, args.out, args.overrides, progress=not args.quiet)
-    except KeyboardInterrupt:
-        print("interrupted: no package written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"pantohil: package {_interrupted_by(exc)}: no package written", file=sys.stderr)
+        return _interrupt_code(exc)
     if args.zip:
         archive = shutil.make_archive(str(out), "zip", root_dir=out.parent, base_dir=out.name)
         print(f"archive: {archive}")
@@ -621,6 +656,10 @@ def _cmd_direct(args) -> int:
     case = load_case(args.case, args.overrides)
     if args.second_pantograph_at is not None and args.second_pantograph_at <= 0:
         raise CaseError(f"--second-pantograph-at: must be > 0 m (got {args.second_pantograph_at:g})")
+    if args.out:
+        from pantohil.orchestrator.output_paths import check_output_file
+
+        check_output_file(args.out, "--out")
     res = direct_solution(case, args.second_pantograph_at, args.max_spacing)
     s = res["single"]
     print(
@@ -641,7 +680,9 @@ def _cmd_direct(args) -> int:
                 f"|Z| {h['z0_amplitude_m'] * 1e3:.2f} mm): {ls} m"
             )
     if args.out:
-        args.out.write_text(json.dumps(res, indent=2) + "\n")
+        from pantohil.orchestrator.report import write_json_atomic
+
+        write_json_atomic(args.out, res)
     return 0
 
 
@@ -649,7 +690,7 @@ def _cmd_fem_sim(args) -> int:
     from pantohil.orchestrator.fem_sim import run_fem_sim
 
     case = load_case(args.case, args.overrides)
-    s = run_fem_sim(case, args.spans, args.out, args.central, progress=not args.quiet)
+    s = run_fem_sim(case, args.spans, args.out, args.central, progress=not args.quiet, overwrite=args.overwrite)
     c = s["contact_force"]
     print(f"{s['n_spans']} spans, central {s['central_spans']}: mean {c['mean_N']:.2f} N, std {c['std_N']:.2f} N "
           f"(20 Hz), max {c['max_N']:.1f} N, min {c['min_N']:.1f} N, contact loss {c['contact_loss_pct']:.2f} %; "
@@ -661,7 +702,7 @@ def _cmd_fem_sim(args) -> int:
 def _cmd_compare(args) -> int:
     from pantohil.orchestrator.fem_sim import compare_runs
 
-    r = compare_runs(args.run_a, args.run_b, args.out)
+    r = compare_runs(args.run_a, args.run_b, args.out, args.overwrite)
     if r["std_difference_pct"] is None:  # the second run's force does not vary: no % of its std
         print(f"std {r['a']['std_N']:.2f} N ({r['a']['label']}) vs {r['b']['std_N']:.2f} N ({r['b']['label']}, "
               f"constant); rms difference {r['rms_difference_N']:.2f} N")
@@ -680,10 +721,11 @@ def _cmd_stability(args) -> int:
     delays = parse_range(args.delay, "--delay", integer=True)
     try:
         s = run_stability(args.case, args.overrides, args.out, args.update, f_max, stiffness, delays,
-                          args.relaxation, args.scheduler, args.workers, progress=not args.quiet)
-    except KeyboardInterrupt:
-        print("interrupted: no map written", file=sys.stderr)
-        return 130
+                          args.relaxation, args.scheduler, args.workers, progress=not args.quiet,
+                          overwrite=args.overwrite)
+    except KeyboardInterrupt as exc:
+        print(f"pantohil: stability {_interrupted_by(exc)}: no map written", file=sys.stderr)
+        return _interrupt_code(exc)
     except RuntimeError as exc:  # rows that failed on a worker: the others are in stability.csv
         print(f"pantohil: error: {exc}", file=sys.stderr)
         return 1
@@ -694,15 +736,17 @@ def _cmd_stability(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
+    from pantohil.orchestrator.output_paths import check_output_folder
     from pantohil.orchestrator.sweep import run_sweep
 
+    check_output_folder(args.out, "--out", keep_if="sweep.json")  # a sweep folder continues the same sweep
     try:
         s = run_sweep(catalog.resolve(args.file, "sweep"), args.out, args.scheduler, args.workers,
                       progress=not args.quiet, engine=args.engine, point_plots=True if args.point_plots else None)
-    except KeyboardInterrupt:
-        print(f"interrupted: the points done so far are in {args.out / 'results.csv'}; run the same command again "
-              "to run the others", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"pantohil: sweep {_interrupted_by(exc)}: the points done so far are in {args.out / 'results.csv'}; "
+              "run the same command again to run the others", file=sys.stderr)
+        return _interrupt_code(exc)
     print(f"{s['name']}: {s['points']} points ({s['skipped_done']} already done, {s['ran']} run): "
           + ", ".join(f"{k} {v}" for k, v in sorted(s["statuses"].items())) + f"; {s['wall_s']:.1f} s on "
           f"{s['workers']} workers")
@@ -714,57 +758,99 @@ def _cmd_example(args) -> int:
     from pantohil.models.catenary.pfem.paper_c_appendix import paper_c_appendix
     from pantohil.orchestrator.report import plot_force_history, write_json_atomic
 
-    res = paper_c_appendix()
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(args.out / "summary.json", res)
-    plot_force_history(args.out / "contact_force.png", res["force_history_N"], res["contact_points"],
-                       "Paper C Appendix A: contact force of the simulated HIL test (Fig. A.4)")
+    from pantohil.orchestrator.output_paths import atomic_output_folder
+
+    with atomic_output_folder(args.out, "--out", args.overwrite) as part:
+        res = paper_c_appendix()
+        write_json_atomic(part / "summary.json", res)
+        plot_force_history(part / "contact_force.png", res["force_history_N"], res["contact_points"],
+                           "Paper C Appendix A: contact force of the simulated HIL test (Fig. A.4)")
     print(f"first forces {', '.join(f'{f:.4f}' for f in res['first_forces_N'][:2])} N; steady force "
           f"{' '.join(f'{f:.4f}' for f in res['steady_force_N'])} N after {res['blocks_to_converge']} blocks")
     print(f"written to {args.out}")
     return 0
 
 
-def _terminate(signum, frame):
-    raise KeyboardInterrupt  # the commands other than `run` end on Ctrl-C or SIGTERM alike
+COMMAND_HANDLERS = {"build": "_cmd_build", "direct": "_cmd_direct", "package": "_cmd_package",
+                    "rig-emulator": "_cmd_emulator", "rig-identify": "_cmd_identify", "catenary": "_cmd_catenary",
+                    "example": "_cmd_example", "fem-sim": "_cmd_fem_sim", "compare": "_cmd_compare",
+                    "stability": "_cmd_stability", "sweep": "_cmd_sweep", "watch": "_cmd_watch", "cases": "_cmd_cases"}
 
 
 def main(argv: list[str] | None = None) -> int:
-    """The `pantohil` command: parse the arguments, run the command, return its exit code."""
+    """The `pantohil` command: parse the arguments, run the command, return its exit code.
+
+    SIGINT, SIGTERM and SIGHUP end every command the same way: one line, exit 128 + the signal; a run
+    ends at a step boundary with a complete record, any other command at once, leaving no output half
+    written (orchestrator/stopping.py)."""
+    from pantohil.models.scratch import process_scratch
     from pantohil.orchestrator.stopping import stop_on_signals
 
-    signal.signal(signal.SIGTERM, _terminate)
-    args = _parser().parse_args(argv)
-    if args.command == "run":  # a stop signal ends the run at a step boundary with a complete record
-        with stop_on_signals() as stop:
-            return _guarded(lambda a: _cmd_run(a, stop), args)
-    handler = {"build": _cmd_build, "direct": _cmd_direct, "package": _cmd_package,
-               "rig-emulator": _cmd_emulator, "rig-identify": _cmd_identify, "catenary": _cmd_catenary,
-               "example": _cmd_example, "fem-sim": _cmd_fem_sim, "compare": _cmd_compare, "stability": _cmd_stability,
-               "sweep": _cmd_sweep, "watch": _cmd_watch, "cases": _cmd_cases}[args.command]
-    return _guarded(handler, args)
+    # every temporary file of the command (FMU builds, extracted FMUs, unpacked SSP files) in one folder of
+    # this process: removed at its exit, or by the next command if this one is killed
+    previous, tempfile.tempdir = tempfile.tempdir, str(process_scratch())
+    try:
+        with stop_on_signals(raising=True) as stop:
+            args = _parser().parse_args(argv)
+            if args.command == "run":  # a stop signal ends the run at a step boundary with a complete record
+                stop.defer()
+                return _guarded(lambda a: _cmd_run(a, stop), args)
+            return _guarded(globals()[COMMAND_HANDLERS[args.command]], args)
+    finally:
+        tempfile.tempdir = previous
 
 
 def _guarded(handler, args) -> int:
-    """Bad input: one line and exit 2; an FMU failure: one line and exit 1."""
+    """Bad input: one line and exit 2; an FMU failure or a failed write: one line and exit 1; a stop
+    signal: one line and exit 128 + the signal."""
     try:
         return handler(args)
     except (CaseError, CatenaryError, ProfileError, InputFileError) as exc:
         print(f"pantohil: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except KeyboardInterrupt as exc:  # the output mechanisms have removed what they had not finished
+        print(f"pantohil: {args.command} {_interrupted_by(exc)}", file=sys.stderr)
+        return _interrupt_code(exc)
     except Exception as exc:  # an FMU or master failure: one line, the run folder keeps what was written
-        operator_file = sys.modules.get("pantohil.models.catenary.pfem.operator_file")  # not imported: not raised
-        if operator_file is not None and isinstance(exc, operator_file.OperatorFileError):
-            print(f"pantohil: error: {' '.join(str(exc).split())}", file=sys.stderr)
-            return EXIT_BAD_INPUT
-        from fmpy.fmi1 import FMICallException
+        code = _failure_code(exc)
+        if code is None:
+            raise
+        return code
 
-        from pantohil.orchestrator.fmu_runtime import FmuError
 
-        if isinstance(exc, (FMICallException, FmuError)):
-            print(f"pantohil: error: an FMU failed: {exc}", file=sys.stderr)
-            return 1
-        raise
+def _interrupt_code(exc: BaseException) -> int:
+    """The exit code of a command a stop signal ended: 128 + the signal."""
+    from pantohil.orchestrator.stopping import exit_code, signal_of
+
+    return exit_code(signal_of(exc))
+
+
+def _interrupted_by(exc: BaseException) -> str:
+    from pantohil.orchestrator.stopping import signal_of
+
+    return f"interrupted by {signal.Signals(signal_of(exc)).name}"
+
+
+def _failure_code(exc: Exception) -> int | None:
+    """One line on stderr and the exit code of a known failure; None for an unexpected one (a bug)."""
+    from pantohil.orchestrator.output_paths import write_failure
+
+    operator_file = sys.modules.get("pantohil.models.catenary.pfem.operator_file")  # not imported: not raised
+    if operator_file is not None and isinstance(exc, operator_file.OperatorFileError):
+        print(f"pantohil: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    failure = write_failure(exc)
+    if failure is not None:  # a full disk, a file size limit: what was written stays readable
+        print(f"pantohil: error: {failure}", file=sys.stderr)
+        return 1
+    from fmpy.fmi1 import FMICallException
+
+    from pantohil.orchestrator.fmu_runtime import FmuError
+
+    if isinstance(exc, (FMICallException, FmuError)):
+        print(f"pantohil: error: an FMU failed: {exc}", file=sys.stderr)
+        return 1
+    return None
 
 
 if __name__ == "__main__":

@@ -10,7 +10,8 @@ from pantohil.models.catenary.fe.definition import load_definition
 from pantohil.models.metrics import LOWPASS_CUTOFF_HZ, force_statistics, lowpass, lowpass_periodic
 
 from . import report
-from .recorder import McapRecorder
+from .output_paths import atomic_output_folder, check_output_folder
+from .recorder import McapWriter
 from .run_folder import CENTRAL_SPANS, STEADY_SPAN, read_summary, read_table
 
 CUTOFF_HZ = LOWPASS_CUTOFF_HZ
@@ -29,16 +30,14 @@ def central_spans(n_spans: int, central: int) -> list[int]:
     return list(range(first, first + central))
 
 
-def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progress: bool = True) -> dict:
+def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progress: bool = True,
+                overwrite: bool = False) -> dict:
     """`pantohil fem-sim`: simulate an n-span section of a case's catenary and write its run folder.
 
     summary.json holds the statistics of the central spans after the 20 Hz low-pass; central_spans.csv
-    the force on the PFEM run's grid; also dropper corrections, run.mcap and plots.
+    the force on the PFEM run's grid; also dropper corrections, run.mcap and plots. The folder is checked
+    before the simulation (new or empty; `overwrite` replaces it whole) and appears complete or not at all.
     """
-    from pantohil.models.progress import progress as progress_bar
-
-    from pantohil.models.catenary.fe.simulation import simulate_section
-
     spans = central_spans(n_spans, central)
     if not case.values["catenary"]["definition_file"]:
         raise CaseError("catenary.definition_file: the case's catenary has no catenary file to build a section from")
@@ -46,18 +45,31 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
     cat = load_definition(path)
     if case.pantograph.model != "chain":
         raise CaseError("pantograph.model: fem-sim needs a pantograph in contact (\"chain\"), not a rigid mass")
-    slacken = case.values["pfem"]["droppers"]
-    n, dt = case.samples_per_span, case.dt_s
-    out_dir = Path(out_dir)
+    with atomic_output_folder(out_dir, "--out", overwrite) as part:
+        res = _simulate(case, cat, n_spans, progress)
+        summary = _write_section(part, case, cat, path, n_spans, spans, res)
+    return summary
+
+
+def _simulate(case: Case, cat, n_spans: int, progress: bool):
+    """The conventional simulation of the section, with its progress (a bar, or lines in a log)."""
+    from pantohil.models.catenary.fe.simulation import simulate_section
+    from pantohil.models.progress import progress as progress_bar
+
     with progress_bar(1, f"fem-sim {n_spans} spans", "step", progress) as bar:
         def tick(k, total):
             bar.total = total
             bar.n = k
             bar.refresh()
 
-        res = simulate_section(cat, case.pantograph, n_spans, case.speed_m_s, dt, slacken, progress=tick,
-                               reference_height_m=case.reference_height_m())
-    out_dir.mkdir(parents=True, exist_ok=True)
+        return simulate_section(cat, case.pantograph, n_spans, case.speed_m_s, case.dt_s,
+                                case.values["pfem"]["droppers"], progress=tick,
+                                reference_height_m=case.reference_height_m())
+
+
+def _write_section(out_dir: Path, case: Case, cat, path: Path, n_spans: int, spans: list[int], res) -> dict:
+    """The run folder of a simulated section: tables, run.mcap, plots, and summary.json last."""
+    n, dt, slacken = case.samples_per_span, case.dt_s, case.values["pfem"]["droppers"]
     filtered = lowpass(res.force_N, dt)
     # sample m of span j is the instant t = (j n + m) dt; result row k is at t = (k + 1) dt
     sel = np.concatenate([np.arange(j * n - 1, (j + 1) * n - 1) for j in spans])
@@ -73,7 +85,7 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
         "catenary_file": str(path), "catenary_label": _label(cat), "n_spans": n_spans, "central_spans": spans,
         "speed_kmh": case.speed_kmh, "dt_s": dt, "samples_per_span": n, "droppers_slacken": slacken,
         "contact_force": {**force_statistics(filtered[sel]), "filter": f"zero-phase {CUTOFF_HZ:g} Hz low-pass",
-                          "contact_loss_pct": force_statistics(res.force_N[sel])["contact_loss_pct"],
+                          "contact_loss_pct": float(100 * np.mean(res.force_N[sel] <= 0.0)),
                           "raw": force_statistics(res.force_N[sel])},
         "max_support_uplift_m": float(np.max(res.support_uplift_m[sel][:, central_supports])),
         "droppers": {"slack_steps": [int(c) for c in np.count_nonzero(corr_mid > 0, axis=0)],
@@ -101,14 +113,16 @@ def _write_force_tables(out_dir: Path, spans, blocks_raw, blocks, dt, n, corr_mi
 
 def _write_mcap(out_dir: Path, case: Case, n_spans: int, dt, per_span, res, filtered, d_mid) -> None:
     """Write run.mcap: the pantograph's position and force and the middle central span's dropper forces."""
-    recorder = McapRecorder(out_dir / "run.mcap", {
+    recorder = McapWriter(out_dir / "run.mcap", {
         "/pantograph": {"x_m": "pantograph position [m]", "contact_force": "contact force [N]",
                         "filtered_force": f"{CUTOFF_HZ:g} Hz low-pass [N]"},
         "/droppers": {f"dropper_{d + 1}": f"force of dropper {d + 1} of the middle central span [N]"
                       for d in range(per_span)}}, {"case": case.name, "n_spans": n_spans, "dt_s": dt})
-    recorder.write_block("/pantograph", res.t_s, np.column_stack([res.x_m, res.force_N, filtered]))
-    recorder.write_block("/droppers", res.t_s, res.dropper_force_N[:, d_mid].astype(float))
-    recorder.close()
+    try:
+        recorder.write_block("/pantograph", res.t_s, np.column_stack([res.x_m, res.force_N, filtered]))
+        recorder.write_block("/droppers", res.t_s, res.dropper_force_N[:, d_mid].astype(float))
+    finally:
+        recorder.close()
 
 
 def _write_plots(out_dir: Path, case: Case, n_spans: int, dt, cat, res, filtered, spans, blocks, corr_mid,
@@ -197,8 +211,10 @@ def _dropper_tables(a: Path, b: Path) -> tuple[np.ndarray, np.ndarray] | None:
     return (da, db) if da.shape == db.shape else None
 
 
-def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
-    """`pantohil compare`: the 20 Hz contact force of two run folders, their stds and RMS difference."""
+def compare_runs(a: Path, b: Path, out_dir: Path, overwrite: bool = False) -> dict:
+    """`pantohil compare`: the 20 Hz contact force of two run folders, their stds and RMS difference; the
+    folder out_dir appears complete or not at all (`overwrite` replaces a used one)."""
+    check_output_folder(out_dir, "--out", overwrite)  # before reading the runs
     fa, dta, la = span_force(a)
     fb, dtb, lb = span_force(b)
     if la == lb:  # two runs of one case: their folders tell them apart
@@ -218,8 +234,14 @@ def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
            "rms_difference_pct_of_std_b": _percent_of(rms, std_ref, fb),
            "filter": f"zero-phase {CUTOFF_HZ:g} Hz low-pass"}
     droppers = _dropper_tables(Path(a), Path(b))  # every input read before anything is written
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with atomic_output_folder(out_dir, "--out", overwrite) as part:
+        _write_comparison(part, res, (fa, dta, la), (fb, dtb, lb), droppers)
+    return res
+
+
+def _write_comparison(out_dir: Path, res: dict, run_a: tuple, run_b: tuple, droppers) -> None:
+    """compare.json (last) and the plots of `pantohil compare`; the dropper measures go into res."""
+    (fa, dta, la), (fb, dtb, lb) = run_a, run_b
     report.plot_force_comparison(out_dir / "contact_force.png", dta, {la: fa, lb: fb},
                                  f"contact force, {CUTOFF_HZ:g} Hz: std {np.std(fa):.2f} vs {np.std(fb):.2f} N, "
                                  f"rms difference {res['rms_difference_N']:.2f} N")
@@ -230,4 +252,3 @@ def compare_runs(a: Path, b: Path, out_dir: Path) -> dict:
             res[f"dropper_{key}"] = {"a": ma[key], "b": mb[key]}
         report.plot_dropper_comparison(out_dir / "dropper_corrections.png", da, db, la, lb)
     report.write_json_atomic(out_dir / "compare.json", res)
-    return res

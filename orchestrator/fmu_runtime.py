@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 import shutil
-import tempfile
 from pathlib import Path
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave, fmi2Boolean, fmi2Integer, fmi2Real, fmi2ValueReference
+from pantohil.models.scratch import scratch_dir
 
 STATUS_NAMES = {0: "OK", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 
@@ -45,7 +45,7 @@ class FmuInstance:
     def __init__(self, name: str, path: Path, logging: bool = False):
         self.name = name
         self.description = read_model_description(str(path))
-        self._dir = tempfile.mkdtemp(prefix=f"pantohil_{name}_")
+        self._dir = str(scratch_dir(f"{name}_"))  # removed by the next run if this process is killed
         extract(str(path), self._dir)
         self.vr = {v.name: v.valueReference for v in self.description.modelVariables}
         self.types = {v.name: v.type for v in self.description.modelVariables}

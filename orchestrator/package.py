@@ -13,6 +13,7 @@ from pantohil.builder.ssp import write_ssp
 from pantohil.models.case import Case, CaseError
 
 from .hil_run import delay_plan, run_case
+from .output_paths import check_output_folder
 
 TEMPLATES = Path(build_fmus.__file__).parent / "partner"
 
@@ -42,9 +43,7 @@ def make_package(case: Case, out_dir: Path, overrides: list[str], progress: bool
     """
     if case.values["profile"]["source"] == "csv":
         raise CaseError("profile.source: a package cannot yet carry a CSV profile; use a dropper profile")
-    out_dir = Path(out_dir)
-    if out_dir.exists() and any(out_dir.iterdir()):
-        raise CaseError(f"package folder {out_dir} exists and is not empty")
+    out_dir = check_output_folder(out_dir, "--out")  # new or empty; not a file, not under one
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     stage = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))  # same filesystem: atomic rename
     try:

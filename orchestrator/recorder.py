@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import errno
 import fcntl
+import logging
 import multiprocessing as mp
 import os
+import resource
 import signal
 from pathlib import Path
 
@@ -20,8 +23,21 @@ from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
 from .channels import EVENT_SCHEMAS, RowEncoder, encode_event, event_schema, group_schema, schema_name
 from .pacing import background_priority
+from .stopping import shielded
 
 
+def _quiet_sdk() -> None:
+    """foxglove-sdk prints one line per message it fails to log (a full disk: one per remaining message of
+    the block, hundreds); the writer's flush and close raise the failure once, which is what is reported.
+    Its own log goes below CRITICAL, without the root handler its set-up would add."""
+    root = logging.getLogger()
+    handlers = list(root.handlers)
+    foxglove.set_log_level(logging.CRITICAL)
+    for handler in [h for h in root.handlers if h not in handlers]:
+        root.removeHandler(handler)
+
+
+_quiet_sdk()
 CHUNK_BYTES = 1 << 16  # small chunks: a file cut short loses at most one; `pantohil watch` reads complete chunks
 
 
@@ -87,6 +103,7 @@ class McapWriter:
 PIPE_BYTES = 1 << 20  # a span of samples fits: handing it over never blocks the stepping loop
 PR_SET_PDEATHSIG = 1
 PARENT_GONE_SIGNAL = signal.SIGUSR1
+WRITE_FAILED = 75  # exit code of a writer process whose file could not be written
 
 
 class _ParentGone(Exception):
@@ -107,6 +124,7 @@ def _detach_from_parent(parent_pid: int) -> None:
     and is told by the kernel when its parent dies, even by SIGKILL."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)  # a closed terminal: the parent stops, then closes the file
     signal.signal(PARENT_GONE_SIGNAL, _on_parent_gone)
     with contextlib.suppress(OSError, AttributeError):  # not Linux: the pipe's end of file still tells
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(PARENT_GONE_SIGNAL), 0, 0, 0)
@@ -136,17 +154,36 @@ def _writer_process(conn, send_end, parent_pid: int, path: str, groups: dict, me
     send_end.close()  # only the parent may hold the writing end: its death is then an end of file here
     _detach_from_parent(parent_pid)
     background_priority()  # the stepping loop and a rig emulator on this machine come first
-    writer = McapWriter(Path(path), groups, metadata)
+    writer = None
     try:
+        writer = McapWriter(Path(path), groups, metadata)
         while (msg := _receive(conn)) is not None:
             if msg[0] == "block":
                 writer.write_block(*msg[1:])
             elif msg[0] == "event":
                 writer.write_event(*msg[1:])
             writer.flush()
-    finally:
         writer.close()
+    except Exception:  # a full disk, a size limit: the file keeps its complete chunks; the parent says why
+        with contextlib.suppress(Exception):
+            writer is not None and writer.close()
+        os._exit(WRITE_FAILED)
+    finally:
         conn.close()
+
+
+def _write_error(path: Path) -> OSError:
+    """The error of a writer process that could not write `path` (foxglove-sdk does not say which): the
+    file size limit reached (EFBIG), no room left on its disk (ENOSPC), else an I/O error."""
+    code = errno.EIO
+    with contextlib.suppress(OSError):
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        st = os.statvfs(path.parent)
+        if limit != resource.RLIM_INFINITY and path.stat().st_size + 2 * CHUNK_BYTES >= limit:
+            code = errno.EFBIG
+        elif st.f_bavail * st.f_frsize < 2 * CHUNK_BYTES:
+            code = errno.ENOSPC
+    return OSError(code, f"{os.strerror(code)}; {path.name} holds its complete chunks", str(path))
 
 
 class McapRecorder:
@@ -166,18 +203,29 @@ class McapRecorder:
                                  name="pantohil-mcap", daemon=False)
         self._proc.start()
         recv.close()
+        self._path = Path(path)
         self.messages = 0
         self._closed = False
 
+    def _post(self, msg: tuple, messages: int) -> None:
+        """Send one message whole, and count its `messages`: a stop signal waits for its end (half a message
+        would leave the writer waiting for the rest, and this process waiting for the writer). A writer
+        that stopped: its error."""
+        try:
+            with shielded():
+                self._send.send(msg)
+                self.messages += messages
+        except (BrokenPipeError, ConnectionResetError):
+            self._proc.join(10)
+            raise _write_error(self._path) from None
+
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
         """Send a block of per-step rows of a topic to the logger process."""
-        self._send.send(("block", topic, np.asarray(t), np.asarray(columns)))
-        self.messages += len(t)
+        self._post(("block", topic, np.asarray(t), np.asarray(columns)), len(t))
 
     def write_event(self, topic: str, t: float, record: dict) -> None:
         """Send one JSON message of a topic to the logger process."""
-        self._send.send(("event", topic, t, record))
-        self.messages += 1
+        self._post(("event", topic, t, record), 1)
 
     def flush(self) -> None:
         """Nothing to do: the logger process flushes after every message it writes."""
@@ -187,9 +235,15 @@ class McapRecorder:
         if self._closed:
             return
         self._closed = True
-        with contextlib.suppress(BrokenPipeError, OSError):
+        with contextlib.suppress(BrokenPipeError, OSError), shielded():
             self._send.send(("close",))
         self._send.close()
         self._proc.join(timeout_s)
+        if self._proc.is_alive():  # never left behind: it would hold the file open
+            self._proc.kill()
+            self._proc.join()
+            raise RuntimeError(f"MCAP writer process did not finish {self._path.name} within {timeout_s:g} s")
+        if self._proc.exitcode == WRITE_FAILED:
+            raise _write_error(self._path)
         if self._proc.exitcode not in (0, None):
             raise RuntimeError(f"MCAP writer process failed with exit code {self._proc.exitcode}")

@@ -28,6 +28,8 @@ from pantohil.models.rig.identification import (Excitation, IdentificationError,
 from pantohil.models.rig.rig_file import rig_to_toml, with_measured
 from pantohil.models.storage import write_text_atomic
 
+from .stopping import shielded
+
 LINK_FAULT = 2
 MAX_REUSED = 0.01  # rig-paced: reused ticks a record may hold (their figures are printed)
 
@@ -214,9 +216,10 @@ def _step_adapter(inst, heights: np.ndarray, extra: int, dt: float, window: Clea
     rows = np.empty((len(heights) + extra, 4))
     last = len(heights) - 1
     for k in range(len(rows)):
-        command.write([float(heights[min(k, last)])])
-        inst.do_step(k * dt, dt)
-        reused, link = ints.read()
+        with shielded():  # a stop signal interrupts between steps, never inside the FMU
+            command.write([float(heights[min(k, last)])])
+            inst.do_step(k * dt, dt)
+            reused, link = ints.read()
         if link == LINK_FAULT:
             raise LinkLost(f"link to the rig lost at step {k} of the excitation: nothing identified")
         rows[k, :3] = reals.read()

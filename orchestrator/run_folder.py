@@ -59,16 +59,30 @@ def _clear(folder: Path) -> None:
 
 
 def _lock(folder: Path) -> int:
-    try:
-        fd = os.open(folder / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
-    except OSError as exc:
-        raise RunFolderError(f"run folder {folder}: cannot write into it ({exc.strerror})") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
+    """An exclusive lock on the folder: flock on its lock file, held by the file that is under the lock
+    name. A holder unlinks the file before it lets go, so a lock taken on a file that is no longer under
+    that name (opened just before it was unlinked) is worth nothing: drop it and take the new file."""
+    path = folder / LOCK_NAME
+    while True:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise RunFolderError(f"run folder {folder}: cannot write into it ({exc.strerror})") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise RunFolderError(f"run folder {folder}: another run is writing into it") from None
+        if _names_the_same_file(fd, path):
+            return fd
         os.close(fd)
-        raise RunFolderError(f"run folder {folder}: another run is writing into it") from None
-    return fd
+
+
+def _names_the_same_file(fd: int, path: Path) -> bool:
+    try:
+        return os.path.samestat(os.fstat(fd), os.stat(path))
+    except FileNotFoundError:
+        return False
 
 
 @contextmanager
@@ -109,6 +123,7 @@ def claimed_run_folder(folder: Path, overwrite: bool = False, resume: bool = Fal
 
 
 def _release(folder: Path, fd: int) -> None:
+    """Unlink the lock file while it is still locked, then let go (see _lock)."""
     with suppress(OSError):
         os.unlink(folder / LOCK_NAME)
     os.close(fd)

@@ -25,6 +25,7 @@ from pantohil.models.storage import atomic_path
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
 from .hil_run import delay_plan
+from .output_paths import atomic_output_folder
 from .report import write_json_atomic
 
 COLUMNS = ("update", "f_max_hz", "contact_stiffness_N_m", "delay_steps", "relaxation", "spectral_radius")
@@ -167,9 +168,11 @@ def _map_summary(case: Case, update: str, rows: list[dict], tasks: list[dict], n
 def run_stability(case_path: Path | None, overrides: list[str], out: Path, update: str | None = None,
                   f_max_hz: np.ndarray | None = None, contact_stiffness_N_m: np.ndarray | None = None,
                   delay_steps: np.ndarray | None = None, relaxation: float | None = None,
-                  scheduler: str | None = None, workers: int | None = None, progress: bool = True) -> dict:
+                  scheduler: str | None = None, workers: int | None = None, progress: bool = True,
+                  overwrite: bool = False) -> dict:
     """The spectral-radius map over f_max, contact stiffness and delay (Paper D sec. 4); an axis not
-    given takes the case's value (the delay: the case's latency and advance)."""
+    given takes the case's value (the delay: the case's latency and advance). The folder `out` is checked
+    first and appears complete or not at all (`overwrite` replaces a used one)."""
     case = load_case(case_path, overrides)
     update = update or case.hil_update
     if update not in ("step", "span"):
@@ -186,8 +189,6 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
               "delay_steps": d, "latency_steps": lat, "relaxation": relaxation}
              for d, lat in pairs for f in f_values]
     tasks.sort(key=lambda t: -t["f_max_hz"])  # the rows with most harmonics cost most: first, so none is left last
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
     errors: list[str] = []
     t0 = time.perf_counter()
@@ -198,21 +199,23 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
         else:
             rows.extend(result)
 
-    with dask_client(scheduler, workers) as client:
-        n_workers = worker_count(client)
-        t_start = time.perf_counter()
-        keys = [f"stability-{os.getpid()}-{i}" for i in range(len(tasks))]
-        run_tasks(client, stability_row, tasks, keys, keep, progress, desc="stability map",
-                  weight=lambda task: len(task["contact_stiffness_N_m"]))
-        t_map = time.perf_counter() - t_start
-    rows.sort(key=lambda r: (r["delay_steps"], r["f_max_hz"], r["contact_stiffness_N_m"]))
-    write_csv(out / "stability.csv", rows)
-    from .report import plot_stability_maps
+    with atomic_output_folder(out, "--out", overwrite) as part:
+        with dask_client(scheduler, workers) as client:
+            n_workers = worker_count(client)
+            t_start = time.perf_counter()
+            keys = [f"stability-{os.getpid()}-{i}" for i in range(len(tasks))]
+            run_tasks(client, stability_row, tasks, keys, keep, progress, desc="stability map",
+                      weight=lambda task: len(task["contact_stiffness_N_m"]))
+            t_map = time.perf_counter() - t_start
+        rows.sort(key=lambda r: (r["delay_steps"], r["f_max_hz"], r["contact_stiffness_N_m"]))
+        write_csv(part / "stability.csv", rows)
+        from .report import plot_stability_maps
 
-    figures = plot_stability_maps(out, rows, case.pantograph, update, case.name)
-    summary = _map_summary(case, update, rows, tasks, n_workers, scheduler, errors, relaxation, t_map, t0, figures)
-    write_json_atomic(out / "summary.json", summary)
-    if errors:
+        figures = plot_stability_maps(part, rows, case.pantograph, update, case.title)
+        summary = _map_summary(case, update, rows, tasks, n_workers, scheduler, errors, relaxation, t_map, t0,
+                               figures)
+        write_json_atomic(part / "summary.json", summary)
+    if errors:  # the map of the rows that ran is in place
         raise RuntimeError(f"{len(errors)} map rows failed; first: {errors[0]}")
     return summary
 

@@ -23,13 +23,16 @@ sweep and folder skips the points already in it.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
+import ctypes
 import hashlib
 import itertools
 import json
 import math
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -230,10 +233,21 @@ def _run_in_child(task: dict, folder: Path) -> None:
         cmd += ["--set", o]
     cmd += ["--out", str(folder), "--quiet", "--engine", task["engine"]]
     cmd += [] if task.get("point_plots", False) else ["--no-plots"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True, preexec_fn=_end_with_parent)
     if proc.returncode not in (0, 1) or not (folder / SUMMARY).exists():
         lines = (proc.stderr or proc.stdout).strip().splitlines()
         raise RuntimeError(lines[-1] if lines else f"pantohil run exited with {proc.returncode}")
+
+
+PR_SET_PDEATHSIG = 1
+
+
+def _end_with_parent() -> None:
+    """preexec of a point's `pantohil run`: the kernel sends it SIGTERM when the worker thread that waits
+    for it ends (the worker dies with a killed sweep, SIGKILL included), so that it stops at a step
+    boundary with its record instead of running on without anyone to read it."""
+    with contextlib.suppress(OSError, AttributeError):  # not Linux: the point runs to its end
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
 
 
 def _read_results(path: Path) -> list[dict]:
@@ -323,12 +337,12 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
             rows.append(row)
             _write_results(out, rows, columns)
 
-        interrupted = False
+        interrupted = None
         try:
             keys = [f"sweep-{definition['hash']}-{p['id']}-{os.getpid()}" for p in todo]
             run_tasks(client, sweep_point, tasks, keys, keep, progress, desc=definition["name"])
-        except KeyboardInterrupt:
-            interrupted = True
+        except KeyboardInterrupt as exc:  # kept, with its signal, for after the results are written
+            interrupted = exc
         wall = time.perf_counter() - t0
     if rows:
         _write_results(out, rows, columns)
@@ -338,10 +352,10 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
                "point_plots": definition["point_plots"],
                "points": len(points), "skipped_done": len(done), "ran": len(rows) - len(done), "statuses": statuses,
                "workers": n_workers, "scheduler": scheduler or "LocalCluster", "wall_s": wall,
-               "interrupted": interrupted, "figures": figures}
+               "interrupted": interrupted is not None, "figures": figures}
     write_json_atomic(out / "summary.json", summary)
-    if interrupted:
-        raise KeyboardInterrupt
+    if interrupted is not None:
+        raise interrupted
     return summary
 
 
