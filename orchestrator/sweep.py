@@ -314,11 +314,40 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
     done = {pid for pid, r in existing.items() if r.get("status") in DONE}
     todo = [p for p in points if p["id"] not in done]
     rows = [existing[p["id"]] for p in points if p["id"] in done]
+    if todo:
+        n_workers, wall, interrupted = _run_points(definition, todo, rows, out, columns,
+                                                   (scheduler, workers, progress, log))
+    else:  # a finished sweep run again: nothing to run, no cluster to start
+        out.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(marker, definition)
+        log(f"{definition['name']}: all {len(points)} points already done")
+        n_workers, wall, interrupted = 0, 0.0, None
+    if rows:
+        _write_results(out, rows, columns)
+    figures = plot_sweep(out, rows, definition) if rows else []
+    statuses = _status_counts(rows)
+    summary = {"name": definition["name"], "kind": definition["kind"], "engine": definition["engine"],
+               "point_plots": definition["point_plots"],
+               "points": len(points), "skipped_done": len(done), "ran": len(rows) - len(done), "statuses": statuses,
+               "workers": n_workers, "scheduler": scheduler or "LocalCluster", "wall_s": wall,
+               "interrupted": interrupted is not None, "figures": figures}
+    write_json_atomic(out / "summary.json", summary)
+    if interrupted is not None:
+        raise interrupted
+    return summary
+
+
+def _run_points(definition: dict, todo: list, rows: list, out: Path, columns: list, how: tuple):
+    """Run the points not done on Dask, appending their rows (results.csv rewritten as each finishes);
+    (workers, wall time, the KeyboardInterrupt that stopped it or None)."""
+    scheduler, workers, progress, log = how
+    points_total = len(todo) + len(rows)
+    marker = out / "sweep.json"
     with dask_client(scheduler, workers) as client:  # an unreachable scheduler fails before anything is written
         out.mkdir(parents=True, exist_ok=True)
         write_json_atomic(marker, definition)
         n_workers = worker_count(client)
-        log(f"{definition['name']}: {len(points)} points, {len(done)} already done, {len(todo)} to run "
+        log(f"{definition['name']}: {points_total} points, {len(rows)} already done, {len(todo)} to run "
             f"on {n_workers} workers")
         tasks = [{"kind": definition["kind"], "engine": definition["engine"], "case": definition["case"],
                   "point_plots": definition["point_plots"], "overrides": p["overrides"],
@@ -344,19 +373,7 @@ def run_sweep(sweep_path: Path, out: Path, scheduler: str | None = None, workers
         except KeyboardInterrupt as exc:  # kept, with its signal, for after the results are written
             interrupted = exc
         wall = time.perf_counter() - t0
-    if rows:
-        _write_results(out, rows, columns)
-    figures = plot_sweep(out, rows, definition) if rows else []
-    statuses = _status_counts(rows)
-    summary = {"name": definition["name"], "kind": definition["kind"], "engine": definition["engine"],
-               "point_plots": definition["point_plots"],
-               "points": len(points), "skipped_done": len(done), "ran": len(rows) - len(done), "statuses": statuses,
-               "workers": n_workers, "scheduler": scheduler or "LocalCluster", "wall_s": wall,
-               "interrupted": interrupted is not None, "figures": figures}
-    write_json_atomic(out / "summary.json", summary)
-    if interrupted is not None:
-        raise interrupted
-    return summary
+    return n_workers, wall, interrupted
 
 
 def plot_sweep(out: Path, rows: list[dict], definition: dict) -> list[str]:

@@ -150,6 +150,10 @@ def test_an_interrupted_sweep_redoes_only_the_missing_points(tmp_path):
     for point, row in first.items():  # done points were not run again
         assert rows[point]["finished_utc"] == row["finished_utc"]
     check_speed_results(out)
+    done = pantohil("sweep", str(path), "--workers", "2", "--out", str(out), "--quiet", timeout=3600)
+    assert done.returncode == 0 and "all 12 points already done" in done.stdout, done.stdout + done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["workers"] == 0 and summary["ran"] == 0  # a finished sweep starts no cluster
 
 
 @pytest.mark.parametrize("grid,needle", [
