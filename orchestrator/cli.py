@@ -282,6 +282,21 @@ def _add_sweep_command(sub) -> None:
     sweep.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _add_export_command(sub) -> None:
+    export = sub.add_parser("export", help="a run's per-step history as a table: RUN_FOLDER/steps.parquet (and "
+                                           "steps.csv), one row per step, one column per logged signal")
+    export.add_argument("folder", type=Path, help="run folder (the --out of `pantohil run`)")
+    export.add_argument("--csv", action="store_true", help="also write steps.csv")
+
+
+def _cmd_export(args) -> int:
+    from pantohil.orchestrator.export import export_run
+
+    for path in export_run(args.folder, args.csv):
+        print(f"written: {path}")
+    return 0
+
+
 def _add_cases_command(sub) -> None:
     sub.add_parser("cases", help="list the shipped cases, catenaries, rigs and sweeps, which every command takes "
                                  "by name (pantohil run pfem_benchmark_250)")
@@ -328,6 +343,7 @@ COMMANDS = (  # the order of `pantohil --help`
     _add_example_command,
     _add_direct_command,
     _add_cases_command,
+    _add_export_command,
 )
 
 
@@ -774,7 +790,8 @@ def _cmd_example(args) -> int:
 COMMAND_HANDLERS = {"build": "_cmd_build", "direct": "_cmd_direct", "package": "_cmd_package",
                     "rig-emulator": "_cmd_emulator", "rig-identify": "_cmd_identify", "catenary": "_cmd_catenary",
                     "example": "_cmd_example", "fem-sim": "_cmd_fem_sim", "compare": "_cmd_compare",
-                    "stability": "_cmd_stability", "sweep": "_cmd_sweep", "watch": "_cmd_watch", "cases": "_cmd_cases"}
+                    "stability": "_cmd_stability", "sweep": "_cmd_sweep", "watch": "_cmd_watch", "cases": "_cmd_cases",
+                    "export": "_cmd_export"}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -85,3 +85,24 @@ def test_plot_titles_name_the_overrides():
     assert load_case(None).title == "asm_250"
     assert load_case(None, ["hil.max_frequency_hz=20", "run.max_spans=3"]).title == \
         "asm_250 [hil.max_frequency_hz=20, run.max_spans=3]"
+
+
+def test_the_per_step_history_exports_as_a_table(tmp_path):
+    import pandas as pd
+
+    out = tmp_path / "run"
+    proc = pantohil("run", "--engine", "inprocess", "--out", str(out), "--quiet", "--no-plots",
+                    "--set", "run.max_spans=3")
+    assert proc.returncode == 1, proc.stderr
+    proc = pantohil("export", str(out), "--csv")
+    assert proc.returncode == 0, proc.stderr
+    steps = pd.read_parquet(out / "steps.parquet")
+    summary, span = load_run(out)
+    n = summary["samples_per_span"]
+    assert len(steps) == 3 * n and np.allclose(steps["t_s"], np.arange(3 * n) * summary["dt_s"])
+    assert {"catenary.contact_force", "rig.actuator_height", "pantograph.head_height"} <= set(steps.columns)
+    # the log keeps 10 significant digits (orchestrator/channels.py), the CSV 13
+    assert np.allclose(steps["catenary.force_at_sample"].to_numpy()[-n:], span[:, 3], rtol=1e-9, atol=0)
+    assert pd.read_csv(out / "steps.csv").shape == steps.shape
+    bad = pantohil("export", str(tmp_path))  # no run.mcap
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1 and "no run.mcap" in bad.stderr
