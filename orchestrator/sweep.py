@@ -18,8 +18,9 @@ run folder under points/: with the in-process engine, in the Dask worker itself;
 `pantohil run --engine fmu` in a child process of the worker (the engine changes the time a point takes,
 not its result: the sweep's hash leaves it out); a point of kind "direct" is the ASM closed
 form, with the extra key `direct.second_pantograph_m` for a trailing pantograph (Paper A Fig. 17). The
-results table (results.csv and results.parquet) is rewritten after every point; a restart with the same
-sweep and folder skips the points already in it.
+results table (results.csv and results.parquet) is rewritten at most every RESULTS_EVERY_S while points
+finish and at the end (rewriting it after each of a thousand quick points cost more than the points); a
+restart with the same sweep and folder skips the points already in it.
 """
 from __future__ import annotations
 
@@ -55,6 +56,7 @@ DIRECT_KEYS = ("direct.second_pantograph_m",)
 STATS = ("status", "converged", "diverged", "spans", "mean_N", "std_N", "std_20hz_N", "max_N", "min_N",
          "trailing_std_N", "trailing_std_20hz_N", "wall_s", "finished_utc", "message")
 DONE = ("converged", "completed", "span_limit", "diverged", "ok")
+RESULTS_EVERY_S = 2.0  # results.csv/.parquet rewritten at most this often while points finish, and at the end
 MAX_POINTS = 10_000  # points of a sweep, all grid keys together
 
 
@@ -354,6 +356,7 @@ def _run_points(definition: dict, todo: list, rows: list, out: Path, columns: li
                   "extra": p["extra"], "folder": str((out / "points" / p["id"]).resolve())} for p in todo]
         by_task = {id(t): p for t, p in zip(tasks, todo, strict=False)}
         t0 = time.perf_counter()
+        written = [time.monotonic()]
 
         def keep(task, result, error):
             p = by_task[id(task)]
@@ -364,7 +367,9 @@ def _run_points(definition: dict, todo: list, rows: list, out: Path, columns: li
             else:
                 row.update(result)
             rows.append(row)
-            _write_results(out, rows, columns)
+            if time.monotonic() - written[0] >= RESULTS_EVERY_S:  # the whole table each time: not after every point
+                _write_results(out, rows, columns)
+                written[0] = time.monotonic()
 
         interrupted = None
         try:
