@@ -32,6 +32,7 @@ from .stopping import shielded
 
 LINK_FAULT = 2
 MAX_REUSED = 0.01  # rig-paced: reused ticks a record may hold (their figures are printed)
+LOCKSTEP_ANSWER_WAIT_S = 1.0  # model-paced: the longest wait for each answer (link.receive_timeout_s if longer)
 
 
 class LinkLost(Exception):
@@ -186,8 +187,12 @@ def _adapter_rows(case: Case, hardware: tuple, heights: np.ndarray, extra: int, 
 
     fmu = build_case_fmus(case, tmp / "fmus", 0, ("adapter",), hardware)["adapter"]
     inst = FmuInstance("adapter", fmu)
+    link = case.values["link"]
+    # lockstep: nothing paces the excitation and the record needs every answer, so each is waited for
+    patient = {} if link["paced_by"] == "rig" else {"receive_timeout_s": max(link["receive_timeout_s"],
+                                                                              LOCKSTEP_ANSWER_WAIT_S)}
     try:
-        inst.setup(0.0, {})  # the excitation starts at 0, the adapter's starting height
+        inst.setup(0.0, patient)  # the excitation starts at 0, the adapter's starting height
         _check_session(inst, hardware)
         set_realtime_priority(rt_priority)
         gc.collect()

@@ -14,7 +14,6 @@ from .case_reference import case_dropper_positions, closed_form_reference
 from .run_summary import ForceStatistics, RunSummary, Timing
 
 FILTER_HZ = 20.0
-REPORTED_MEASURED_SHARE = 0.99  # on a rig, the reported span has at most 1 % of its forces kept from the span before
 
 
 def _catenary_summary(case: Case) -> dict:
@@ -131,14 +130,14 @@ def _final_status(state) -> tuple[str, str, str | None]:
 
 def _reported_span(state, spans_done: int) -> int | None:
     """The span whose force the summary reports: the last one, or on a rig the last one with at least
-    REPORTED_MEASURED_SHARE of its forces measured (a span the rig did not answer holds the span before's
-    forces: it shows nothing measured), if the master still holds it; None if there is none."""
+    link.min_measured_fraction of its forces measured (a span the rig did not answer holds the span before's
+    forces: it shows nothing measured; the same share below which the run stops as a link fault), if the
+    master still holds it; None if there is none."""
     if spans_done < 1:
         return None
     history = state.monitor.history if state.monitor is not None else []
-    n = state.case.samples_per_span
-    whole = [h["span"] for h in history
-             if h.get("measured", n) >= REPORTED_MEASURED_SHARE * n and h["span"] < spans_done]
+    n, share = state.case.samples_per_span, state.case.values["link"]["min_measured_fraction"]
+    whole = [h["span"] for h in history if h.get("measured", n) >= share * n and h["span"] < spans_done]
     if state.prepared.options.hardware is None or not history:
         return spans_done - 1
     oldest = (state.master.k - state.master.capacity) // n if state.master is not None else 0

@@ -195,11 +195,11 @@ def test_a_dead_rig_is_never_converged_whatever_the_tolerated_losses(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "link_lost" and not summary["converged"]
     assert "data failed" in stderr and "were measured" in stderr
-    # the force it reports is of a span the rig answered (99 % measured), not the kept forces of the dead rig's
+    # the force it reports is of a span the rig answered (link.min_measured_fraction, 0.5), not the kept forces
     n = summary["samples_per_span"]
     assert summary["convergence"][-1]["measured"] < n / 2
     if "reported_span" in summary:
-        assert summary["convergence"][summary["reported_span"]]["measured"] >= 0.99 * n
+        assert summary["convergence"][summary["reported_span"]]["measured"] >= 0.5 * n
     else:
         assert "contact_force" not in summary
 

@@ -21,7 +21,7 @@ def test_default_case_converges_to_the_closed_form(default_run):
     # the dynamic part within 0.5 % (rms) of the closed form's standard deviation
     assert summary["reference"]["rms_error_rel_std"] <= 5e-3
     assert summary["contact_force"]["mean_N"] == pytest.approx(summary["pantograph"]["uplift_force_N"], rel=1e-3)
-    assert span.shape == (936, 4)
+    assert span.shape == (936, 5)  # t_s, z0_m, z_m, f_N, x_m
     for name in ("run.mcap", "contact_force.png", "convergence.png", "summary.json", "steady_span.csv"):
         assert (default_run / name).stat().st_size > 0
     for key in ("wall_s", "simulated_s", "realtime_factor"):
