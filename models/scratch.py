@@ -15,7 +15,8 @@ _OWNER = re.compile(rf"^{PREFIX}(\d+)-")
 _mine: dict[int, Path] = {}  # pid -> its folder (a forked child makes its own)
 
 
-def _running(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this id exists (one of another user counts)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -34,7 +35,7 @@ def sweep_dead(base: Path) -> list[Path]:
         return removed
     for entry in entries:
         match = _OWNER.match(entry.name)
-        if match and int(match[1]) != os.getpid() and not _running(int(match[1])):
+        if match and int(match[1]) != os.getpid() and not pid_alive(int(match[1])):
             shutil.rmtree(entry, ignore_errors=True)
             removed.append(entry)
     return removed

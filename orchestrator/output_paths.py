@@ -18,7 +18,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
-from .run_folder import LOCK_NAME, SUMMARY, RunFolderError
+from pantohil.models.scratch import pid_alive
+
+from .run_folder import SUMMARY, RunFolderError, run_is_alive
 from .stopping import shielded
 
 PART_PATTERN = re.compile(r"^\.(?P<name>.+)\.(?:part|old)-(?P<pid>\d+)$")
@@ -73,7 +75,7 @@ def check_output_folder(path: Path, option: str, overwrite: bool = False, keep_i
     if not os.access(base, os.W_OK | os.X_OK):
         raise RunFolderError(f"{option} {path}: cannot write into {base} (permission denied)")
     if path.is_dir() and any(path.iterdir()):
-        if _locked(path):
+        if run_is_alive(path):
             raise RunFolderError(f"{option} {path}: a run is writing into it")
         if keep_if is not None and (path / keep_if).exists():
             return path
@@ -82,34 +84,6 @@ def check_output_folder(path: Path, option: str, overwrite: bool = False, keep_i
             remedy = "--overwrite replaces it whole" if keep_if is None else f"it holds no {keep_if}: use a new folder"
             raise RunFolderError(f"{option} {path}: {what} ({remedy})")
     return path
-
-
-def _locked(folder: Path) -> bool:
-    """Whether a run holds the folder's lock now."""
-    import fcntl
-
-    try:
-        fd = os.open(folder / LOCK_NAME, os.O_RDONLY)
-    except OSError:
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return True
-    finally:
-        os.close(fd)
-    return False
-
-
-def pid_alive(pid: int) -> bool:
-    """Whether a process with this id exists (one of another user counts)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def sweep_dead_parts(folder: Path) -> None:

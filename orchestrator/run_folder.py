@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.case import CaseError
-from pantohil.models.input_files import InputFileError, load_json, read_input_text
+from pantohil.models.input_files import InputFileError, load_json, open_regular, read_input_text
 
 LOCK_NAME = ".pantohil-run.lock"
 SUMMARY = "summary.json"
@@ -159,3 +159,19 @@ def read_table(folder: Path, name: str) -> np.ndarray:
     if table.size == 0:
         raise CaseError(f"run table {path} has no rows")
     return table
+
+
+def run_is_alive(folder: Path) -> bool:
+    """Whether a process holds the folder's run lock now (a run killed without cleaning up holds none). The
+    lock file is opened as a regular file without waiting (a FIFO in its place is no lock)."""
+    try:
+        fd = open_regular(Path(folder) / LOCK_NAME, "run lock")
+    except InputFileError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False

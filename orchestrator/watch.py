@@ -24,7 +24,7 @@ from pantohil.models.case import CaseError
 from pantohil.models.input_files import InputFileError, open_regular
 
 from .mcap_follow import McapFollower, McapFollowError
-from .run_folder import LOCK_NAME, read_summary
+from .run_folder import LOCK_NAME, read_summary, run_is_alive
 
 BARS = "▁▂▃▄▅▆▇█"
 SPARK_WIDTH = 60
@@ -149,20 +149,6 @@ def _open_lock(folder: Path) -> int | None:
         return open_regular(folder / LOCK_NAME, "run lock")
     except InputFileError:
         return None
-
-
-def run_is_alive(folder: Path) -> bool:
-    """Whether a process holds the folder's run lock (a run killed without cleaning up holds none)."""
-    fd = _open_lock(folder)
-    if fd is None:
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return True
-    finally:
-        os.close(fd)
-    return False
 
 
 def wait_for_run_end(folder: Path) -> None:

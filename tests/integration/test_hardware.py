@@ -206,21 +206,27 @@ def test_fuzzing_the_adapter(tmp_path):
     assert out["lost"] + out["late"] == stats["corrupted"]
 
 
-@pytest.mark.slow
-def test_link_loss_ends_the_run_with_exit_3_and_a_readable_log(tmp_path):
-    # the emulator is killed mid-run
-    emu = Emulator(tmp_path)
-    out = tmp_path / "lost"
+def run_killing_the_rig(emu: Emulator, out: Path, tolerated_losses: int) -> tuple[str, str]:
+    """A real-time hardware run whose emulator is killed once a span is logged; its stdout and stderr."""
     run = subprocess.Popen([sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--hardware", emu.address,
-                            "--realtime", "--out", str(out), "--quiet", "--set", "link.tolerated_losses=100"],
+                            "--realtime", "--out", str(out), "--quiet", "--set",
+                            f"link.tolerated_losses={tolerated_losses}"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     log = out / "run.mcap"
     while not (log.exists() and log.stat().st_size > 70_000):  # a span logged: the session is stepping
         assert run.poll() is None, run.communicate()
         time.sleep(0.05)
     emu.proc.kill()
-    stdout, stderr = run.communicate(timeout=120)
+    stdout, stderr = run.communicate(timeout=600)
     assert run.returncode == 3, stdout + stderr
+    return stdout, stderr
+
+
+@pytest.mark.slow
+def test_link_loss_ends_the_run_with_exit_3_and_a_readable_log(tmp_path):
+    # the emulator is killed mid-run
+    out = tmp_path / "lost"
+    stdout, stderr = run_killing_the_rig(Emulator(tmp_path), out, 100)
     lines = stderr.strip().splitlines()
     assert len(lines) == 1 and "link to the rig lost" in lines[0] and "Traceback" not in stderr
     summary = json.loads((out / "summary.json").read_text())
@@ -373,15 +379,16 @@ def test_a_silent_master_loses_its_session(tmp_path):
 
 
 class FakeRig:
-    """The test plays the rig controller on a real socket, answering COMMANDs with chosen forces."""
+    """The test plays the rig controller on a real socket, answering COMMANDs with chosen forces (and
+    reporting `latency` steps in its STATUS)."""
 
-    def __init__(self, force: float, stranger: bool):
+    def __init__(self, force: float, stranger: bool, latency: float = 0.0):
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.settimeout(30.0)
         self.port = self.sock.getsockname()[1]
         self.other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.force, self.stranger = force, stranger
+        self.force, self.stranger, self.latency = force, stranger, latency
         self.commands: list[float] = []  # the height of every COMMAND received
         threading.Thread(target=self._serve, daemon=True).start()
 
@@ -393,7 +400,7 @@ class FakeRig:
                 return
             m = proto.decode(data)
             if m.type == proto.HELLO:
-                reply = proto.Message(proto.STATUS, 0, 0, session=m.session)
+                reply = proto.Message(proto.STATUS, 0, 0, a=self.latency, session=m.session)
             elif m.type == proto.COMMAND:
                 self.commands.append(m.a)
                 if self.stranger:  # a valid answer, from another address, then a guessed session's

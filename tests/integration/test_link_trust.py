@@ -9,12 +9,11 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 
 import pytest
 
 from pantohil.fmus import udp_protocol as proto
-from test_hardware import Emulator, FakeRig, free_port
+from test_hardware import Emulator, FakeRig, free_port, run_killing_the_rig
 
 pytestmark = pytest.mark.network
 
@@ -144,29 +143,8 @@ def _flood(port: int, stop: threading.Event, count: int) -> None:
             s.sendto(junk, ("127.0.0.1", port))
 
 
-class _LyingRig:
-    """A rig that accepts the session with a latency of 1e300 steps."""
-
-    def __init__(self):
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(30.0)
-        self.port = self.sock.getsockname()[1]
-        threading.Thread(target=self._serve, daemon=True).start()
-
-    def _serve(self):
-        while True:
-            try:
-                data, peer = self.sock.recvfrom(2048)
-            except OSError:
-                return
-            m = proto.decode(data)
-            if m.type == proto.HELLO:
-                self.sock.sendto(proto.encode(proto.Message(proto.STATUS, 0, 0, a=1e300, session=m.session)), peer)
-
-
 def test_a_status_with_an_implausible_latency_is_refused(tmp_path):
-    rig = _LyingRig()
+    rig = FakeRig(100.0, stranger=False, latency=1e300)  # it accepts the session with 1e300 steps
     out = tmp_path / "run"
     proc = subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--hardware",
                            f"127.0.0.1:{rig.port}", "--out", str(out), "--quiet"],
@@ -180,18 +158,8 @@ def test_a_status_with_an_implausible_latency_is_refused(tmp_path):
 @pytest.mark.slow
 @pytest.mark.realtime
 def test_a_dead_rig_is_never_converged_whatever_the_tolerated_losses(tmp_path):
-    emu = Emulator(tmp_path)
     out = tmp_path / "dead"
-    run = subprocess.Popen([sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--hardware", emu.address,
-                            "--realtime", "--out", str(out), "--quiet", "--set", "link.tolerated_losses=1000000"],
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    log = out / "run.mcap"
-    while not (log.exists() and log.stat().st_size > 70_000):  # a span logged: the session is stepping
-        assert run.poll() is None, run.communicate()
-        time.sleep(0.05)
-    emu.proc.kill()
-    stdout, stderr = run.communicate(timeout=600)
-    assert run.returncode == 3, stdout + stderr
+    _, stderr = run_killing_the_rig(Emulator(tmp_path), out, 1_000_000)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "link_lost" and not summary["converged"]
     assert "data failed" in stderr and "were measured" in stderr

@@ -18,7 +18,7 @@ import zipfile
 import numpy as np
 import pytest
 
-from conftest import default_sigint, pantohil
+from conftest import default_sigint, pantohil, run_main
 
 STATE = "state"
 
@@ -193,21 +193,6 @@ def test_a_run_resumes_after_the_fmu_cache_was_emptied(tmp_path):
     assert summary["status"] == "converged" and summary["resumed_from_span"] >= 2
 
 
-def _main(argv) -> tuple[int, str]:
-    """The CLI's main in this process: its exit code and stderr."""
-    import contextlib
-
-    from pantohil.orchestrator.cli import main
-
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            code = main(argv)
-        except SystemExit as exc:
-            code = exc.code
-    return code, err.getvalue()
-
-
 HOSTILE_VALUES = (None, [], {}, "x", -1, 2 ** 70, 1.5, True, [[[[]]]], {"$o": "os:system"}, "\0")
 TYPED_KEYS = ("format", "span", "k", "history", "fmu_digests", "case_file", "overrides")
 
@@ -245,7 +230,7 @@ def test_fuzzed_checkpoints_are_refused_in_one_line(interrupted, tmp_path):
     tried = 0
     for what, name, data in _mutants(folder, rng):
         (folder / STATE / name).write_bytes(data)
-        code, err = _main(["run", "--resume", str(folder), "--quiet"])
+        code, err = run_main(["run", "--resume", str(folder), "--quiet"])
         (folder / STATE / name).write_bytes(originals[name])
         lines = err.strip().splitlines()
         assert code == 2 and len(lines) == 1 and "Traceback" not in err, f"{what}: exit {code}: {err[-1500:]}"

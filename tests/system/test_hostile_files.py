@@ -6,8 +6,6 @@ other one must be refused by the command line in one line on stderr, exit 2, wit
 written. The commands run in this process (`main()`), a few as a user would (a subprocess)."""
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import random
@@ -19,13 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CASES_DIR, CATENARIES_DIR, ROOT, pantohil
+from conftest import CASES_DIR, CATENARIES_DIR, ROOT, pantohil, run_main
 
 from pantohil.models.case import CaseError, load_case
 from pantohil.models.catenary.fe.definition import CatenaryError, load_definition
 from pantohil.models.input_files import InputFileError
 from pantohil.models.rig.rig_file import RigFileError, load_rig_file
-from pantohil.orchestrator.cli import main
 
 RIGS_DIR = ROOT / "models" / "data" / "rigs"
 SWEEPS_DIR = ROOT / "models" / "data" / "sweeps"
@@ -103,17 +100,6 @@ def text_mutants(data: bytes, seed: int, n: int = MUTANTS) -> list[tuple[str, by
 
 
 # ---- the check of one refusal ---------------------------------------------------------------------------
-
-def run_main(argv: list[str]) -> tuple[int, str]:
-    """The CLI's main in this process: its exit code and stderr."""
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            code = main(argv)
-        except SystemExit as exc:  # argparse leaves through exit
-            code = exc.code
-    return code, err.getvalue()
-
 
 def assert_refused(code: int, stderr: str, out: Path, what: str) -> None:
     """Exit 2, one line on stderr without a traceback, nothing written into out."""

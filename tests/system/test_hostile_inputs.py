@@ -5,8 +5,6 @@ in this process). How long each refusal takes is measured by tests/benchmarks/be
 not asserted here."""
 from __future__ import annotations
 
-import contextlib
-import io
 import os
 import resource
 import subprocess
@@ -15,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from conftest import run_main
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_CASE = ROOT / "models" / "data" / "cases" / "asm_250.toml"
@@ -374,13 +373,5 @@ def test_hostile_input_is_refused_in_one_line(hostile: Hostile, tmp_path: Path):
 
 @pytest.mark.parametrize("hostile", CASES, ids=[h.name for h in CASES])
 def test_hostile_input_is_refused_by_main(hostile: Hostile, tmp_path: Path):
-    from pantohil.orchestrator.cli import main
-
-    argv = prepare(hostile, tmp_path)
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        try:
-            code = main(argv)
-        except SystemExit as exc:  # argparse leaves through exit
-            code = exc.code
-    check_refusal(hostile, code, err.getvalue(), tmp_path)
+    code, err = run_main(prepare(hostile, tmp_path))
+    check_refusal(hostile, code, err, tmp_path)
