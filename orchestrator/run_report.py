@@ -136,10 +136,10 @@ def _reported_span(state, spans_done: int) -> int | None:
     if spans_done < 1:
         return None
     history = state.monitor.history if state.monitor is not None else []
-    n, share = state.case.samples_per_span, state.case.values["link"]["min_measured_fraction"]
-    whole = [h["span"] for h in history if h.get("measured", n) >= share * n and h["span"] < spans_done]
     if state.prepared.options.hardware is None or not history:
         return spans_done - 1
+    n, share = state.case.samples_per_span, state.case.values["link"]["min_measured_fraction"]
+    whole = [h["span"] for h in history if h.get("measured", n) >= share * n and h["span"] < spans_done]
     oldest = (state.master.k - state.master.capacity) // n if state.master is not None else 0
     return whole[-1] if whole and whole[-1] >= max(oldest, 0) else None
 
