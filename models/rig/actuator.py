@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class ActuatorLimits:
@@ -38,6 +40,39 @@ class Limiter:
         self.z = min(max(z0 if not math.isnan(z0) else 0.0, limits.stroke_min_m), limits.stroke_max_m)
         self.v = 0.0
         self.limited = 0
+
+    def preview(self, wanted) -> tuple[np.ndarray, np.ndarray]:
+        """The heights and velocities the limiter would give for the wanted heights that follow, from its
+        present state, which it leaves unchanged: a horizon within the limits at every step. A horizon the
+        limits do not touch (the usual case) is checked at once; otherwise it is limited step by step."""
+        w = np.asarray(wanted, dtype=float)
+        if self._passes(w):
+            return w, np.diff(w, prepend=self.z) / self.dt
+        saved = self.z, self.v, self.limited
+        try:
+            out = np.array([self(x) for x in w], dtype=float).reshape(-1, 2)
+        finally:
+            self.z, self.v, self.limited = saved
+        return out[:, 0], out[:, 1]
+
+    def _passes(self, w: np.ndarray) -> bool:
+        """Whether the limiter would pass every wanted height unchanged: finite, within the stroke, and
+        within the velocity, acceleration and braking limits of __call__, step after step."""
+        lim, dt = self.lim, self.dt
+        if not (np.all(np.isfinite(w)) and np.all(w >= lim.stroke_min_m) and np.all(w <= lim.stroke_max_m)):
+            return False
+        z_prev = np.concatenate(([self.z], w[:-1]))
+        v = (w - z_prev) / dt
+        v_prev = np.concatenate(([self.v], v[:-1]))
+        a, dv = lim.max_acceleration_m_s2, lim.max_acceleration_m_s2 * dt
+        if np.any(np.abs(v - v_prev) > dv * (1 - 1e-9)) or np.any(np.abs(v) > lim.max_velocity_m_s * (1 - 1e-9)):
+            return False
+        def brake(d):
+            return np.maximum(0.0, np.sqrt(np.maximum(2 * a * d + (a * dt / 2) ** 2, 0.0)) - a * dt / 2)
+        up = brake(lim.stroke_max_m - z_prev - v * dt)
+        down = brake(z_prev + v * dt - lim.stroke_min_m)
+        return bool(np.all(v <= np.maximum(up, v_prev - dv) * (1 - 1e-9) + 1e-15)
+                    and np.all(v >= np.minimum(-down, v_prev + dv) * (1 - 1e-9) - 1e-15))
 
     def __call__(self, wanted: float) -> tuple[float, float]:
         lim, dt = self.lim, self.dt
