@@ -18,7 +18,7 @@ from pantohil.models.catenary.asm.string import AsmParameters, receptance_direct
 from pantohil.models.catenary.profile import DropperProfile, ProfileError, TabulatedProfile, read_profile_csv
 from pantohil.models.catenary.receptance import harmonic_count
 from pantohil.models.data import CASES_DIR, catalog
-from pantohil.models.hil.loop import HilSettings
+from pantohil.models.hil.loop import HORIZON_AUTO_S, MAX_HORIZON_STEPS, HilSettings
 from pantohil.models.input_files import InputFileError, TomlSyntaxError, load_toml, loads_toml
 from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.parameters import (
@@ -285,6 +285,15 @@ class Case:
     def hold_steps(self) -> int:
         """The extra loop delay E of hil.hold_steps [steps] (Paper D sec. 4)."""
         return int(self.values["hil"].get("hold_steps", 0))
+
+    @property
+    def horizon_steps(self) -> int:
+        """H of link.horizon_steps: the heights each answer carries for the rig's next ticks; "auto": the
+        steps of HORIZON_AUTO_S, at most MAX_HORIZON_STEPS (docs/udp-protocol.md)."""
+        value = self.values["link"]["horizon_steps"]
+        if value == AUTO:
+            return min(MAX_HORIZON_STEPS, math.ceil(HORIZON_AUTO_S / self.dt_s - 1e-9))
+        return int(value)
 
     def delay_steps(self, loop_steps: int) -> int:
         """Delay advance D = loop latency of the master's connections + the extra delay E + the rig's latency."""

@@ -181,6 +181,9 @@ class LinkSection:
                                         "per rig tick, answered at once)", choices=("model", "rig"), fmu="adapter")
     sample_timeout_s: float = param(0.5, "s", "rig-paced: silence of the rig after which the link is in fault",
                                     1e-3, 60.0, fmu="adapter")
+    horizon_steps: int = param(AUTO, "1", "heights each answer carries for the rig's next ticks "
+                                          "(docs/udp-protocol.md); \"auto\": the steps of 0.1 s, at most 64", 1, 64,
+                               auto=True)
     min_measured_fraction: float = param(0.5, "1", "smallest share of a span's forces that must be measured; a span "
                                                    "with fewer is a link fault, whatever link.tolerated_losses says",
                                          0.0, 1.0, low_open=True)

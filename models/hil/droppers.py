@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from pantohil.models.hil.loop import UPDATES, HilSettings, hold
+from pantohil.models.hil.loop import UPDATES, HilSettings, commands_ahead, hold
 from pantohil.models.catenary.pfem.operators import PfemOperators
 from pantohil.models.catenary.receptance import reduce_harmonics
 
@@ -85,6 +85,16 @@ class PfemHil:
     def command_at(self, z: np.ndarray, target: int) -> float:
         """The height to command for sample `target`: z there, or (A z) there with the rig compensated."""
         return float(z[target]) if self.comp is None else self.comp.command(z, target)
+
+    def commands_at(self, z: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """command_at for an array of samples."""
+        return z[targets] if self.comp is None else self.comp.commands(z, targets)
+
+    def ahead(self, count: int) -> np.ndarray:
+        """The commands of the next `count` steps as the iterate stands (`commands_ahead`): the current
+        block blends its two snapshots, the next one the last snapshot and z, later ones z."""
+        return commands_ahead(self, count, ((self._z_older, self._z_block), (self._z_block, self.z),
+                                            (self.z, self.z)))
 
     def step(self, force: float) -> float:
         """Take the force measured at the current sample and return the height to command.

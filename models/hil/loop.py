@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 UPDATES = ("step", "span")
+MAX_HORIZON_STEPS = 64  # heights an answer carries at most (docs/udp-protocol.md: 1100 bytes, one frame)
+HORIZON_AUTO_S = 0.1  # link.horizon_steps = "auto": the steps of this time
 
 
 @dataclass(frozen=True)
@@ -23,6 +25,45 @@ class HilSettings:
     delay_steps: int = 1  # D: 1 is the unavoidable one-step loop (Paper D Fig. 4)
     ramp_steps: int = 0  # N_r, Paper D sec. 3.6
     hold_steps: int = 0  # E: extra loop delay, the command leaves E steps after it is computed (Paper D sec. 4)
+
+
+def ramp_factor(settings: HilSettings, steps_done) -> np.ndarray | float:
+    """The initial ramp's scale of the command returned by the step that makes `steps_done` steps
+    (Paper D sec. 3.6): steps_done / N_r below N_r, else 1."""
+    if settings.ramp_steps <= 0:
+        return np.ones_like(steps_done, dtype=float) if isinstance(steps_done, np.ndarray) else 1.0
+    return np.where(steps_done < settings.ramp_steps, steps_done / settings.ramp_steps, 1.0)
+
+
+def commands_ahead(hil, count: int, blocks) -> np.ndarray:
+    """The commands the next `count` steps (k, k + 1, ...) return if the iterate no longer changes: the
+    horizon sent to the rig (docs/udp-protocol.md). At convergence they are exactly what those steps
+    return. The commands in flight through the extra loop delay E come first; then, per step j, the
+    iterate at sample n_bar_j + D (step-by-step, Paper D eq. 2) or the blend of eq. (3) of the block
+    vectors `blocks[min(b_j - b_k, 2)]` = (older, newer) (span-by-span), scaled by the ramp."""
+    s, n, k = hil.s, hil.n, hil.k
+    held = list(hil._held)
+    if s.hold_steps > 0 and not held:  # before the first step: the first command fills the line
+        held = [None] * s.hold_steps
+    in_flight = min(len(held), count)
+    j = k + np.arange(max(count - in_flight, 1) if held and held[0] is None else max(count - in_flight, 0))
+    n_bar = j % n
+    target = (n_bar + s.delay_steps) % n
+    if s.update == "step":
+        values = hil.commands_at(hil.z, target)
+    else:
+        offset = np.minimum(j // n - k // n, 2)
+        w_new = (n_bar + 1) / n
+        values = np.empty(len(j))
+        for b in np.unique(offset):
+            older, newer = blocks[b]
+            m = offset == b
+            values[m] = ((1.0 - w_new[m]) * hil.commands_at(older, target[m])
+                         + w_new[m] * hil.commands_at(newer, target[m]))
+    computed = values * ramp_factor(s, j + 1)
+    if held and held[0] is None:
+        held = [computed[0]] * len(held)
+    return np.concatenate([np.asarray(held[:in_flight], dtype=float), computed[:count - in_flight]])
 
 
 def hold(line: list, command: float, steps: int) -> float:
@@ -115,6 +156,16 @@ class PeriodicHil:
     def command_at(self, z: np.ndarray, target: int) -> float:
         """The height to command for sample `target`: z there, or (A z) there with the rig compensated."""
         return float(z[target]) if self.comp is None else self.comp.command(z, target)
+
+    def commands_at(self, z: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """command_at for an array of samples."""
+        return z[targets] if self.comp is None else self.comp.commands(z, targets)
+
+    def ahead(self, count: int) -> np.ndarray:
+        """The commands of the next `count` steps as the iterate stands (`commands_ahead`); beyond the
+        current block both block vectors are the latest, z (the next block's z is what z is at
+        convergence)."""
+        return commands_ahead(self, count, ((self._z_older, self.z), (self.z, self.z), (self.z, self.z)))
 
     def _span_command(self, n_bar: int) -> float:
         """Linear blend of the two latest block vectors, Paper D eq. (3), with the delay rotation (A.11)."""

@@ -43,6 +43,11 @@ class HarmonicCompensation:
         """(A z)[target]: the height to command for sample `target`."""
         return float(self._rows[self.n - target: 2 * self.n - target] @ z)
 
+    def commands(self, z: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """(A z) at each of `targets`."""
+        windows = np.lib.stride_tricks.sliding_window_view(self._rows, self.n)  # row n - t is command(., t)
+        return windows[self.n - np.asarray(targets)] @ z
+
     def force_column(self, m: int) -> np.ndarray:
         """Column m of B: the true-force estimate per unit measured force at sample m."""
         return self._bcols[self.n - m: 2 * self.n - m]

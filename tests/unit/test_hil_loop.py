@@ -2,6 +2,7 @@
 
 The loop here has the minimal latency of the thesis (force at sample n -> height at n + 1) plus a pure
 delay; the FMU runs in test_cli_run.py add the master's own latency."""
+import math
 from collections import deque
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 from pantohil.models.case import load_case
 from pantohil.models.hil.loop import ConvergenceMonitor, HilSettings, PeriodicHil
 from pantohil.models.pantograph.lumped import make_pantograph
-from pantohil.models.catenary.receptance import asm_operator, reduce_harmonics
+from pantohil.models.catenary.receptance import CirculantOperator, asm_operator, reduce_harmonics
 from pantohil.orchestrator.hil_run import closed_form_reference
 
 
@@ -82,3 +83,26 @@ def test_span_by_span_blends_the_last_two_blocks():
     assert out == [0.0, 0.0, 0.0, 0.0]
     out = [hil.step(1.0) for _ in range(4)]  # block 1: from z^(-1) = z0 towards z^0 = 1 (Paper D eq. 3)
     assert out == pytest.approx([0.25, 0.5, 0.75, 1.0])
+
+
+@pytest.mark.parametrize("update", ["step", "span"])
+@pytest.mark.parametrize("hold_steps", [0, 3])
+@pytest.mark.parametrize("ramp_steps", [0, 80])
+@pytest.mark.parametrize("start", [0, 37, 45])
+def test_the_horizon_is_what_the_next_steps_command_while_the_iterate_stands(update, hold_steps, ramp_steps, start):
+    """PeriodicHil.ahead: with the iterate standing (forces not measured within a block; the fixed point of
+    zero force across blocks) the next steps return exactly the predicted commands: the heights a late
+    answer leaves the rig (docs/udp-protocol.md, "The horizon")."""
+    rng = np.random.default_rng(1)
+    n = 50
+    op = CirculantOperator(rng.normal(size=n) * 1e-4)
+    z0 = rng.normal(size=n) * 0.01
+    hil = PeriodicHil(op, z0, HilSettings(update=update, relaxation=0.3, delay_steps=4, ramp_steps=ramp_steps,
+                                          hold_steps=hold_steps))
+    crosses = update == "span" and start == 45
+    for _ in range(start):
+        hil.step(0.0 if crosses else 100 + rng.normal())
+    count = 70 if crosses else 10 if update == "span" else 60
+    predicted = hil.ahead(count)
+    taken = [hil.step(0.0 if crosses else math.nan) for _ in range(count)]
+    np.testing.assert_allclose(predicted, taken, rtol=0, atol=1e-15)
