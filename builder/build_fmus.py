@@ -33,14 +33,14 @@ from . import loader
 from .operators import case_operators
 from .system import FMU_NAMES, loop_latency_steps
 
-BUILDER_VERSION = "14"
+BUILDER_VERSION = "15"
 MAX_FMU_BYTES = 256 * 1024 * 1024  # a cache entry read to check its digest (a built FMU is about 4 MB)
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
 SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adapter")}
 CLASS_NAMES = {"catenary": "PantohilCatenary", "rig": "PantohilRig", "pantograph": "PantohilPantograph",
                "adapter": "PantohilAdapter"}
-SUPPORT_MODULES = ("__init__.py", "fmu_support.py", "state_codec.py", "udp_protocol.py")
+SUPPORT_MODULES = ("__init__.py", "fmu_support.py", "state_codec.py", "udp_protocol.py", "link_client.py")
 
 
 def fmu_parameters(case: Case, delay_steps: int,
@@ -53,11 +53,12 @@ def fmu_parameters(case: Case, delay_steps: int,
                 "pantograph.dampings_Ns_m": pan.dampings_Ns_m}
     derived = {
         "catenary": {"speed": case.speed_m_s, "time_step": case.dt_s, "samples_per_span": case.samples_per_span,
-                     "rig_compensation": int(case.compensates_rig_response)},
+                     "rig_compensation": int(case.compensates_rig_response), "horizon_steps": case.horizon_steps},
         "pantograph": {"n_masses": pan.n, "reference_height": case.reference_height_m(), "time_step": case.dt_s},
         "rig": {"time_step": case.dt_s, "rig_chain": int(case.rig_spec is not None)},
         "adapter": {"rig_host": rig_address[0], "rig_port": rig_address[1], "time_step": case.dt_s,
-                    "local_host": case.values["link"]["local_host"], "key_file": case.values["link"]["key_file"]},
+                    "local_host": case.values["link"]["local_host"], "key_file": case.values["link"]["key_file"],
+                    "horizon_steps": case.horizon_steps},
     }
     return {name: {**fmu_support.case_values(name, case.values, resolved), **extra} for name, extra in derived.items()}
 

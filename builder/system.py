@@ -6,6 +6,8 @@ the force it answers was measured there: the catenary's delay advance must inclu
 """
 from __future__ import annotations
 
+from pantohil.models.hil.loop import MAX_HORIZON_STEPS
+
 FMU_NAMES = ("catenary", "rig", "pantograph")
 HARDWARE_FMU_NAMES = ("catenary", "adapter")
 
@@ -16,10 +18,15 @@ CONNECTIONS = (
     ("rig", "measured_force", "catenary", "contact_force"),
 )
 
-# On a real rig (or the rig emulator) the adapter stands for rig and pantograph: 2 connections.
+# The catenary's horizon: the heights its next steps command as the iterate stands (docs/udp-protocol.md)
+HORIZON_OUTPUTS = tuple(f"height_ahead_{i}" for i in range(1, MAX_HORIZON_STEPS))
+
+# On a real rig (or the rig emulator) the adapter stands for rig and pantograph: 2 connections on the
+# loop, and the horizon from the catenary to the adapter beside it.
 HARDWARE_CONNECTIONS = (
     ("catenary", "height_command", "adapter", "height_command"),
     ("adapter", "measured_force", "catenary", "contact_force"),
+    *(("catenary", name, "adapter", name) for name in HORIZON_OUTPUTS),
 )
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
 from pantohil.models.catenary.asm.string import AsmParameters
-from pantohil.models.hil.loop import UPDATES, HilSettings, PeriodicHil
+from pantohil.models.hil.loop import MAX_HORIZON_STEPS, UPDATES, HilSettings, PeriodicHil
 from pantohil.models.catenary.pfem.operator_file import load_operators
 from pantohil.models.hil.droppers import PfemHil
 from pantohil.models.catenary.profile import read_profile_csv
@@ -56,7 +56,30 @@ VARIABLES = [
         "Measured contact force (pushing the wire up is positive); NaN: not measured",
         0.0,
     ),
+    Var(
+        "horizon_steps",
+        "integer",
+        "parameter",
+        "1",
+        "Heights of the horizon H: height_command and height_ahead_1 .. height_ahead_{H-1} "
+        "(docs/udp-protocol.md); the outputs beyond repeat the last",
+        1,
+        1,
+        MAX_HORIZON_STEPS,
+    ),
     Var("height_command", "real", "output", "m", "Contact-point height commanded D samples ahead", 0.0),
+    *[
+        Var(
+            f"height_ahead_{i}",
+            "real",
+            "output",
+            "m",
+            f"The height the {i}-th next step commands if the iterate no longer changes (exactly that at "
+            "convergence): the horizon a late answer leaves the rig",
+            0.0,
+        )
+        for i in range(1, MAX_HORIZON_STEPS)
+    ],
     Var("sample_index", "integer", "output", "1", "Label n of the force just received, 0..N-1 in the span", 0),
     Var("span_index", "integer", "output", "1", "Virtual span (block) of the force just received", 0),
     Var("height_at_sample", "real", "output", "m", "Converging wire height at sample_index", 0.0),
@@ -98,6 +121,7 @@ class PantohilCatenary(PantohilSlave):
         super().__init__(**kwargs)
         self._hil = None
         self._pfem = False
+        self._ahead = None  # the horizon of this step, computed when a master first reads it
         register_all(self, VARIABLES)
 
     @property
@@ -162,6 +186,7 @@ class PantohilCatenary(PantohilSlave):
             self._hil = PeriodicHil(op, reduce_harmonics(self._z0, self.harmonics), settings, comp)
         self._pfem = self.catenary_model == 1
         self._label = 0
+        self._ahead = None
         self.height_command = 0.0 if self.ramp_steps > 0 else self._hil.command_at(self._hil.z, self.delay_steps % n)
 
     def _compensation(self, n: int) -> HarmonicCompensation:
@@ -178,7 +203,17 @@ class PantohilCatenary(PantohilSlave):
         hil = self._hil
         self._label = hil.k % hil.n
         self.height_command = hil.step(self.contact_force)
+        self._ahead = None
         return True
+
+    def height_ahead(self, i: int) -> float:
+        """Output height_ahead_i: the command of the i-th next step as the iterate stands (Paper D eqs. 2-3
+        with the delay advance, the hold and the ramp; `commands_ahead`); beyond the horizon, its last."""
+        if self._hil is None:
+            return 0.0
+        if self._ahead is None:
+            self._ahead = self._hil.ahead(max(int(self.horizon_steps) - 1, 1))
+        return float(self._ahead[min(i, len(self._ahead)) - 1])
 
     # Per-step outputs other than the command are read from the iteration's state when a master asks
     # for them, so that do_step does only the work of the loop.
@@ -228,3 +263,11 @@ def _dropper_output(d: int) -> property:
 
 for _d in range(MAX_DROPPERS):
     setattr(PantohilCatenary, f"dropper_correction_{_d + 1}", _dropper_output(_d))
+
+
+def _ahead_output(i: int) -> property:
+    return property(lambda self: self.height_ahead(i))
+
+
+for _i in range(1, MAX_HORIZON_STEPS):
+    setattr(PantohilCatenary, f"height_ahead_{_i}", _ahead_output(_i))

@@ -419,7 +419,8 @@ def _print_run(result, out: Path) -> None:
         print("link: " + ", ".join(f"{k} {result.link[k]}" for k in LINK_COUNTERS))
         if "answer_us" in result.link:
             ln, a = result.link, result.link["answer_us"]
-            print(f"rig-paced: {ln['samples']} samples, {ln['answered']} answered, {ln['reused']} reused by the rig; "
+            print(f"rig-paced: {ln['samples']} samples, {ln['answered']} answered; rig ticks {ln['fresh']} fresh, "
+                  f"{ln['predicted']} predicted, {ln['uncovered']} uncovered; "
                   f"answer p50 {a['p50']:.0f} us, p99 {a['p99']:.0f} us, max {a['max']:.0f} us")
     print(f"run folder: {out}")
     if result.status in ("link_lost", "interrupted"):

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.builder.build_fmus import build_case_fmus
+from pantohil.fmus import link_client
 from pantohil.builder.system import (
     CONNECTIONS,
     FMU_NAMES,
@@ -40,7 +41,7 @@ from .case_reference import case_dropper_positions
 from .case_reference import closed_form_reference as closed_form_reference  # re-exported (tests, callers)
 from .inprocess import ENGINES, InProcessMaster
 from .master import JacobiMaster
-from .pacing import Pacer, set_realtime_priority
+from .pacing import Pacer, lock_memory, set_realtime_priority, unlock_memory
 from .recorder import McapRecorder, McapWriter
 from .rig_clock import Percentiles
 from .run_folder import claimed_run_folder
@@ -50,7 +51,7 @@ from .stopping import StopRequest, stop_on_signals
 
 MASTERS = ("fmpy", "libcosim")
 LOG_WRITERS = ("process", "inline")
-LINK_OK, LINK_FAULT = 0, 2
+LINK_OK, LINK_FAULT = link_client.LINK_OK, link_client.LINK_FAULT
 __all__ = ["EXIT_LINK_LOST", "RunInterrupted", "RunObserver", "RunOptions", "RunSummary", "delay_plan", "run_case"]
 
 _CATENARY_GROUP = {"height_command": "commanded height [m]", "contact_force": "force received (NaN: not measured) [N]",
@@ -80,19 +81,18 @@ HARDWARE = Topology("hardware", HARDWARE_FMU_NAMES, HARDWARE_CONNECTIONS, {
     "/adapter": {"command_sent": "height sent, within the actuator limits [m]",
                  "measured_force": "force from the rig (NaN: no answer) [N]",
                  "actuator_height": "actuator height reported by the rig [m]",
-                 "link_state": "0 ok, 1 missing, 2 fault", "sent": "[-]", "received": "[-]", "lost": "[-]",
-                 "late": "[-]", "reordered": "[-]", "duplicated": "[-]", "malformed": "[-]", "foreign": "[-]",
-                 "nonfinite": "[-]", "limited": "[-]"},
+                 "link_state": "0 ok, 1 missing, 2 fault", **{c: "[-]" for c in link_client.COUNTERS},
+                 **{c: f"{text} [-]" for c, text in link_client.TICK_COUNTS.items()}},
 }, ("adapter", "measured_force"))
 RIG_PACED_FIELDS = {"answer_time": "rig-paced: from the sample reaching the socket to the answer [s]",
-                    "samples": "rig samples received in time [-]", "answered": "samples answered [-]",
-                    "reused": "rig ticks that reused an old answer (the rig's count) [-]"}
-LINK_COUNTERS = ("sent", "received", "lost", "late", "reordered", "duplicated", "malformed", "foreign", "nonfinite",
-                 "limited")
-RIG_PACED_COUNTERS = ("samples", "answered", "reused")
+                    **{c: f"{text} [-]" for c, text in link_client.RIG_PACED_COUNTERS.items()}}
+LINK_COUNTERS = (*link_client.COUNTERS, *link_client.TICK_COUNTS)
+RIG_PACED_COUNTERS = tuple(link_client.RIG_PACED_COUNTERS)
 REFUSALS = {1: "it speaks another protocol version", 2: "it refused the session start (bad HELLO)",
             4: "it is busy with another session", 8: "it does not run that pacing (link.paced_by)",
-            256: "its STATUS reported a latency outside 0..100000 steps"}
+            16: "it does not take a horizon of link.horizon_steps heights",
+            link_client.REFUSED_LATENCY: "its STATUS reported a latency outside 0..100000 steps",
+            link_client.REFUSED_HORIZON: "its STATUS granted no horizon, or more than link.horizon_steps"}
 RECORDED_SPANS = 12  # spans the master keeps in memory: the last one, the one before and the 10 of the overlay plot
 
 
@@ -463,9 +463,11 @@ def step_until_done(state: RunState) -> None:
             _check_session_start(state.master, hardware)
         if state.pacer is not None:
             state.pacer.start()
-        elif state.rig_paced:  # no pacer: keep collection pauses out of the rig's deadlines here too
+        elif state.rig_paced:  # no pacer: keep collection pauses and page faults out of the rig's deadlines
             gc.collect()
+            gc.freeze()  # what exists now is never scanned again
             gc.disable()
+            state.scheduling = f"{state.scheduling}, {lock_memory()}"
         for span in range(state.first_span, case.values["run"]["max_spans"]):
             outcome = step_span(state, span)
             if outcome is not None:
@@ -475,7 +477,9 @@ def step_until_done(state: RunState) -> None:
         state.status, state.message = stop.status, str(stop)
     finally:
         if state.rig_paced and state.pacer is None:
+            gc.unfreeze()
             gc.enable()
+            unlock_memory()
         state.wall_s, state.cpu_s = time.perf_counter() - t_start, time.process_time() - cpu_start
         end_stepping(state)
 

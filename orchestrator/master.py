@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pantohil.builder.system import HORIZON_OUTPUTS
+
 from .fmu_runtime import FmuInstance
 
 
@@ -22,8 +24,10 @@ class RecordingMaster:
 
     def _init_records(self, descriptions: dict, connections, capacity: int) -> None:
         self.capacity = capacity
-        self.real_outputs = {n: [v.name for v in d.modelVariables if v.causality == "output" and v.type == "Real"]
-                             for n, d in descriptions.items()}
+        connected = {(c[0], c[1]) for c in connections}
+        self.real_outputs = {n: [v.name for v in d.modelVariables if v.causality == "output" and v.type == "Real"
+                                 and (v.name not in HORIZON_OUTPUTS or (n, v.name) in connected)]
+                             for n, d in descriptions.items()}  # an unconnected horizon is not read
         self.int_outputs = {n: [v.name for v in d.modelVariables if v.causality == "output" and v.type == "Integer"]
                             for n, d in descriptions.items()}
         self._in_map, self.input_names = {}, {}

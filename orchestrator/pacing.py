@@ -3,16 +3,21 @@ t0 + k dt. Sleep until shortly before, then spin; record how late each step star
 finished inside its slot."""
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import ctypes.util
 import gc
 import os
 import time
 
 import numpy as np
-import contextlib
 
 SPIN_S = 0.0001  # spin (not sleep) for the last 0.1 ms: sleep wakes up ~60 us late. Spinning much longer
                  # starves a rig emulator or logger on the machine, and under SCHED_FIFO it runs into the
                  # kernel's RT throttling (95 % per second: a 50 ms stall every second, measured)
+
+
+MCL_CURRENT = 1  # <sys/mman.h>
 
 
 def set_realtime_priority(priority: int | None) -> str:
@@ -25,6 +30,25 @@ def set_realtime_priority(priority: int | None) -> str:
         return f"SCHED_FIFO {priority}"
     except (PermissionError, OSError, AttributeError):
         return "normal (SCHED_FIFO not permitted)"
+
+
+def lock_memory() -> str:
+    """Lock the process's pages in RAM (mlockall MCL_CURRENT) if permitted, so that no page fault stalls an
+    answer; returns what it got. Pages mapped later are not locked (MCL_FUTURE could make a later
+    allocation fail under a memory-lock limit)."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        if libc.mlockall(MCL_CURRENT) == 0:
+            return "memory locked"
+        return f"memory not locked ({os.strerror(ctypes.get_errno())})"
+    except (OSError, AttributeError, TypeError):
+        return "memory not locked (no mlockall)"
+
+
+def unlock_memory() -> None:
+    """Undo lock_memory."""
+    with contextlib.suppress(OSError, AttributeError, TypeError):
+        ctypes.CDLL(ctypes.util.find_library("c")).munlockall()
 
 
 def background_priority() -> None:

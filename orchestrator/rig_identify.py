@@ -6,7 +6,7 @@ mounted, either in process through a rig file's chain (`--rig FILE`) or on a rig
 `pantohil rig-emulator`) through the same adapter FMU and UDP link a hardware run uses
 (`--hardware HOST:PORT`). The adapter's answer to a command comes `pipeline_steps` steps later
 (rig-paced: one), so the records are aligned by that shift; a lost answer, or a rig-paced tick that
-reused an old height, spoils the record and nothing is written. Every input is checked first: a bad
+held an old height (no answer covered it), spoils the record and nothing is written. Every input is checked first: a bad
 one is one line, exit code 2, and nothing written.
 """
 from __future__ import annotations
@@ -28,10 +28,12 @@ from pantohil.models.rig.identification import (Excitation, IdentificationError,
 from pantohil.models.rig.rig_file import rig_to_toml, with_measured
 from pantohil.models.storage import write_text_atomic
 
+from pantohil.builder.system import HORIZON_OUTPUTS
+
 from .stopping import shielded
 
 LINK_FAULT = 2
-MAX_REUSED = 0.01  # rig-paced: reused ticks a record may hold (their figures are printed)
+MAX_UNCOVERED = 0.01  # rig-paced: uncovered ticks a record may hold (their figures are printed)
 LOCKSTEP_ANSWER_WAIT_S = 1.0  # model-paced: the longest wait for each answer (link.receive_timeout_s if longer)
 
 
@@ -94,43 +96,44 @@ def identify(req: IdentifyRequest, announce=print) -> dict:
     announce(f"identifying {source}: {case.n_harmonics - 1} harmonics, {exc.frequencies_hz()[0]:.4g}-"
              f"{exc.frequencies_hz()[-1]:.4g} Hz, {req.amplitude_m * 1e3:g} mm, {exc.record_spans} spans recorded "
              f"after {exc.settle_spans} settling ({exc.total_steps} steps), mass {case.pantograph.masses_kg[0]:g} kg")
-    reused = 0
+    uncovered = 0
     if req.hardware is None:
         r = case.values["rig"]
         measured = identify_chain(base, exc, case.pantograph, r["force_offset_N"], r["noise_std_N"], r["noise_seed"])
     else:
-        measured, reused = _identify_hardware(case, req.hardware, exc, req.rt_priority)
-        if reused:
-            announce(f"the record holds {reused} rig ticks that reused an old height (answers later than a tick)")
+        measured, uncovered = _identify_hardware(case, req.hardware, exc, req.rt_priority)
+        if uncovered:
+            announce(f"the record holds {uncovered} uncovered rig ticks (no answer covered them: the actuator held)")
     errors = None
     if chain_known:
         gz, gf = frequency_response(base, case.dt_s, case.samples_per_span, case.n_harmonics)
         errors = response_errors(measured, gz[1:], gf[1:])
-    header = _header(case, exc, source + (f" ({reused} reused ticks in the record)" if reused else ""), errors)
+    header = _header(case, exc, source + (f" ({uncovered} uncovered ticks in the record)" if uncovered else ""),
+                     errors)
     write_text_atomic(Path(req.out), rig_to_toml(with_measured(base, measured), header))
     for line in _report(measured, errors):
         announce(line)
     announce(f"rig file written: {req.out}")
-    return {"measured": measured, "errors": errors, "excitation": exc, "reused": reused}
+    return {"measured": measured, "errors": errors, "excitation": exc, "uncovered": uncovered}
 
 
 @dataclass
 class CleanWindow:
-    """The first window of `length` aligned steps from `first` on with no rig tick that reused an old
-    height in it nor in the `margin` steps before it (the chain's memory); rig-paced records only."""
+    """The first window of `length` aligned steps from `first` on with no uncovered rig tick (one that held an
+    old height) in it nor in the `margin` steps before it (the chain's memory); rig-paced records only."""
 
     first: int
     length: int
     margin: int
     shift: int
-    reused: int = 0
+    uncovered: int = 0
     last_reuse: int = -1
     start: int | None = None
 
-    def update(self, k: int, reused: int) -> bool:
-        """Row k taken with the rig's reused count: True once a clean window is complete."""
-        if reused > self.reused:
-            self.reused, self.last_reuse = reused, k - self.shift
+    def update(self, k: int, uncovered: int) -> bool:
+        """Row k taken with the rig's uncovered count: True once a clean window is complete."""
+        if uncovered > self.uncovered:
+            self.uncovered, self.last_reuse = uncovered, k - self.shift
         begin = max(self.first, self.last_reuse + 1 + self.margin)
         if k - self.shift + 1 >= begin + self.length:
             self.start = begin
@@ -141,10 +144,10 @@ class CleanWindow:
 def _identify_hardware(case: Case, hardware: tuple, exc: Excitation,
                        rt_priority: int | None) -> tuple[MeasuredResponse, int]:
     """The excitation through the adapter FMU and the UDP link, records aligned by the answer's shift;
-    returns the response and the reused ticks in the record. Rig-paced, a tick that reused an old height
-    disturbs the record: the excitation (periodic after the settling spans) goes on for up to 3 more
+    returns the response and the uncovered ticks in the record. Rig-paced, an uncovered tick (the actuator
+    held an old height) disturbs the record: the excitation (periodic after the settling spans) goes on for up to 3 more
     records until a window of whole spans has none, else the window with the fewest is taken if they are
-    at most MAX_REUSED of its ticks (a reused tick matters only where the drive takes a reference)."""
+    at most MAX_UNCOVERED of its ticks (an uncovered tick matters only where the drive takes a reference)."""
     rig_paced = case.values["link"]["paced_by"] == "rig"
     shift = 1 if rig_paced else int(case.values["link"]["pipeline_steps"])
     n, length = exc.samples_per_span, exc.record.stop - exc.record.start
@@ -152,22 +155,22 @@ def _identify_hardware(case: Case, hardware: tuple, exc: Excitation,
     heights = exc.heights(exc.total_steps + (3 * length if rig_paced else 0))
     with tempfile.TemporaryDirectory(prefix="pantohil_identify_") as tmp:
         rows = _adapter_rows(case, hardware, heights, shift, Path(tmp), rt_priority if rig_paced else None, window)
-    reused = 0
+    uncovered = 0
     if window.start is None:
-        window.start, reused = _least_reused(rows[shift:, 3], window)
-        if reused > MAX_REUSED * length:
-            raise IdentificationError(f"the rig reused an old height at {reused} of {length} ticks of the best "
-                                      f"record (answers later than a tick; at most {MAX_REUSED:.0%} taken): nothing "
-                                      f"identified")
+        window.start, uncovered = _least_uncovered(rows[shift:, 3], window)
+        if uncovered > MAX_UNCOVERED * length:
+            raise IdentificationError(f"the rig held an old height (no answer covered the tick) at {uncovered} of "
+                                      f"{length} ticks of the best record (at most {MAX_UNCOVERED:.0%} taken): "
+                                      f"nothing identified")
     command, height, measured = rows[:len(rows) - shift, 0], rows[shift:, 1], rows[shift:, 2]
     true = mass_force(case.pantograph, case.dt_s, height)
     a = slice(window.start - exc.record.start, window.start - exc.record.start + exc.total_steps)
-    return estimate(exc, command[a], height[a], true[a], measured[a]), reused
+    return estimate(exc, command[a], height[a], true[a], measured[a]), uncovered
 
 
-def _least_reused(counts: np.ndarray, window: CleanWindow) -> tuple[int, int]:
-    """The window start with the fewest reused ticks in it and its margin, and that number."""
-    ticks = np.concatenate([[0], np.diff(counts) > 0]).cumsum()  # reused ticks up to each aligned step
+def _least_uncovered(counts: np.ndarray, window: CleanWindow) -> tuple[int, int]:
+    """The window start with the fewest uncovered ticks in it and its margin, and that number."""
+    ticks = np.concatenate([[0], np.diff(counts) > 0]).cumsum()  # uncovered ticks up to each aligned step
     starts = np.arange(window.first, len(counts) - window.length + 1)
     inside = ticks[starts + window.length - 1] - ticks[starts - window.margin]
     best = int(np.argmin(inside))
@@ -178,7 +181,7 @@ def _adapter_rows(case: Case, hardware: tuple, heights: np.ndarray, extra: int, 
                   rt_priority: int | None, window: CleanWindow) -> np.ndarray:
     """Step the adapter FMU over the heights (then `extra` steps holding the last one) until `window` is
     complete: per step the command sent, the actuator height and force of the answer taken, and the rig's
-    reused count. A rig-paced session steps at SCHED_FIFO `rt_priority` (if permitted) with the collector
+    uncovered count. A rig-paced session steps at SCHED_FIFO `rt_priority` (if permitted) with the collector
     paused, as a run."""
     from pantohil.builder.build_fmus import build_case_fmus
 
@@ -215,21 +218,24 @@ def _check_session(inst, hardware: tuple) -> None:
 
 
 def _step_adapter(inst, heights: np.ndarray, extra: int, dt: float, window: CleanWindow) -> np.ndarray:
-    command = inst.port(["height_command"])
+    """Step the adapter through the excitation; the horizon it sends is the excitation's next heights
+    (known in advance), so a late answer costs the rig nothing but an uncovered tick costs the record."""
+    ahead = int(inst.get_values(["horizon_steps"])["horizon_steps"]) - 1
+    command = inst.port(["height_command", *HORIZON_OUTPUTS[:ahead]])
     reals = inst.port(["command_sent", "actuator_height", "measured_force"])
-    ints = inst.port(["reused", "link_state"])
+    ints = inst.port(["uncovered", "link_state"])
     rows = np.empty((len(heights) + extra, 4))
     last = len(heights) - 1
     for k in range(len(rows)):
         with shielded():  # a stop signal interrupts between steps, never inside the FMU
-            command.write([float(heights[min(k, last)])])
+            command.write([float(heights[min(j, last)]) for j in range(k, k + ahead + 1)])
             inst.do_step(k * dt, dt)
-            reused, link = ints.read()
+            uncovered, link = ints.read()
         if link == LINK_FAULT:
             raise LinkLost(f"link to the rig lost at step {k} of the excitation: nothing identified")
         rows[k, :3] = reals.read()
-        rows[k, 3] = reused
-        if window.update(k, reused):
+        rows[k, 3] = uncovered
+        if window.update(k, uncovered):
             return rows[:k + 1]
     return rows
 
