@@ -28,6 +28,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from pantohil.fmus import udp_protocol as proto
+from pantohil.fmus.link_client import TICK_COUNTS
 from pantohil.models.case import Case
 from pantohil.models.pantograph.lumped import make_pantograph
 from pantohil.models.hil.rig_loop import case_rig
@@ -78,16 +79,15 @@ class PacedState:
     sent_ns: dict = field(default_factory=dict)
     samples: int = 0
     answered: int = 0
-    reused: int = 0
     unanswered: int = 0
     doubled: int = 0
     answer_us: Percentiles = field(default_factory=Percentiles)
     tick_late_us: Percentiles = field(default_factory=Percentiles)
 
     def record(self) -> dict:
-        """The rig-paced counters of a session: samples, answered, reused, unanswered, answer times."""
+        """The rig-paced counters of a session: samples, answered, unanswered, answer times."""
         tail = sum(1 for seq in self.sent_ns if seq > self.newest)  # sent after the model's last answer
-        return {"samples": self.samples, "answered": self.answered, "reused": self.reused,
+        return {"samples": self.samples, "answered": self.answered,
                 "unanswered": self.unanswered + len(self.sent_ns) - tail, "after_last_answer": tail,
                 "doubled": self.doubled, "answer_us": self.answer_us.summary(),
                 "tick_lateness_us": self.tick_late_us.summary()}
@@ -156,6 +156,20 @@ class Session:
     last_seq: int = 0  # model-paced: the newest COMMAND executed; none at or below it is executed again
     max_abs_height_m: float = 0.0
     paced: PacedState | None = None
+    horizon: int = 1  # H granted
+    heights: tuple = (0.0,)  # the newest answer's (COMMAND's) heights, for ticks (steps) newest + 1 (+ 0) ...
+    ticks: dict = field(default_factory=lambda: dict.fromkeys(TICK_COUNTS, 0))
+
+    def height_for(self, tick: int, newest: int, first: int) -> float | None:
+        """The height the newest answer carries for `tick` (its heights start at tick newest + first), and
+        the tick counted fresh or predicted; None and counted uncovered if it does not cover the tick
+        (docs/udp-protocol.md, "Which height a tick takes")."""
+        i = tick - newest - first
+        if 0 <= i < len(self.heights):
+            self.ticks["fresh" if i == 0 else "predicted"] += 1
+            return self.heights[i]
+        self.ticks["uncovered"] += 1
+        return None
 
     def record(self, end: str) -> dict:
         """A session's record for the stats file: peer, id, pacing, counters, largest height, how it ended."""
@@ -163,7 +177,7 @@ class Session:
         return {**rig_paced, "number": self.number, "peer": f"{self.peer[0]}:{self.peer[1]}", "id": f"{self.id:016x}",
                 "paced_by": "rig" if self.mode == proto.PACED_BY_RIG else "model", "dt_s": self.dt_s,
                 "commands": self.commands, "foreign": self.foreign, "nonfinite": self.nonfinite,
-                "replayed": self.replayed,
+                "replayed": self.replayed, "horizon_steps": self.horizon, **self.ticks,
                 "max_abs_height_m": self.max_abs_height_m, "end": end}
 
 
@@ -206,28 +220,33 @@ class RigEmulator:
         self.pan = make_pantograph(c.pantograph, self.dt, c.reference_height_m())
         self.pan.settle(0.0)
         self._z = self._v = 0.0
+        self._recorded = 0
         self._held = None
 
     def _record_command(self, z: float) -> None:
+        """The reference a step or tick applies: the largest height, velocity and acceleration commanded."""
         s = self.stats
         v = (z - self._z) / self.dt
-        a = (v - self._v) / self.dt if s.commands > 1 else 0.0
+        a = (v - self._v) / self.dt if self._recorded > 1 else 0.0
         s.max_abs_height_m = max(s.max_abs_height_m, abs(z))
         self.session.max_abs_height_m = max(self.session.max_abs_height_m, abs(z))
-        if s.commands > 0:
+        if self._recorded > 0:
             s.max_abs_velocity_m_s = max(s.max_abs_velocity_m_s, abs(v))
             s.max_abs_acceleration_m_s2 = max(s.max_abs_acceleration_m_s2, abs(a))
         s.last_height_m = z
         s.last_commands_m = (s.last_commands_m + [z])[-20:]
         self._z, self._v = z, v
+        self._recorded += 1
 
     def _send(self, data: bytes, peer) -> None:
         with contextlib.suppress(OSError):
             self.sock.sendto(data, peer)
 
-    def _status(self, peer, session: int, state: int, faults: int = 0, latency: int = 0, mode: int = 0) -> None:
+    def _status(self, peer, session: int, state: int, faults: int = 0, latency: int = 0, mode: int = 0,
+                horizon: int = 0) -> None:
         self._send(proto.encode(proto.Message(proto.STATUS, 0, 0, a=float(latency), b=getattr(self, "dt", 0.0),
-                                              u=state, w=faults, session=session, c=float(mode)), self.key), peer)
+                                              u=state, w=faults, session=session, c=float(mode), horizon=horizon),
+                                self.key), peer)
 
     def _answer(self, reply: bytes, peer) -> None:
         f, r, s = self.faults, self._rng.random(), self.stats
@@ -272,8 +291,10 @@ class RigEmulator:
             self.stats.malformed += 1
             if isinstance(exc, proto.OtherVersion):
                 self.stats.old_version += 1
-                if proto.is_v1_hello(data):  # an old model computer: tell it, in its own version, why not
-                    self._send(proto.v1_refusal(), peer)
+                version = proto.old_hello_version(data)
+                if version is not None:  # an old model computer: tell it, in its own version, why not
+                    session = int.from_bytes(data[8:16], "little") if version > 1 else 0
+                    self._send(proto.old_refusal(version, session), peer)
             return
         self._expire(time.monotonic())
         s = self.session
@@ -315,10 +336,12 @@ class RigEmulator:
             self.stats.replayed += 1
             self._status(peer, msg.session, proto.RIG_FAULT, proto.FAULT_BAD_HELLO, mode=self.pacing.mode)
             return
+        bad_horizon = not 1 <= msg.horizon <= proto.MAX_HORIZON_STEPS
         if (not MIN_DT_S <= msg.a <= MAX_DT_S or msg.session == 0 or msg.u != self.pacing.mode
-                or self._other_dt(msg.a)):
+                or self._other_dt(msg.a) or bad_horizon):
             self.stats.bad_hello += 1
-            faults = proto.FAULT_BAD_HELLO | (proto.FAULT_PACING if msg.u != self.pacing.mode else 0)
+            faults = (proto.FAULT_BAD_HELLO | (proto.FAULT_PACING if msg.u != self.pacing.mode else 0)
+                      | (proto.FAULT_HORIZON if bad_horizon else 0))
             self._status(peer, msg.session, proto.RIG_FAULT, faults, mode=self.pacing.mode)
             return
         opening = s is None
@@ -326,10 +349,10 @@ class RigEmulator:
             self._reset(msg.a)
             self.stats.sessions += 1
             self.session = Session(self.stats.sessions, peer, msg.session, msg.u, msg.a, time.monotonic(),
-                                   paced=PacedState() if msg.u == proto.PACED_BY_RIG else None)
+                                   paced=PacedState() if msg.u == proto.PACED_BY_RIG else None, horizon=msg.horizon)
         latency = (chain_latency_steps(self.rig_spec, self.dt) if self.rig_spec is not None
                    else self.case.rig.latency_steps(self.dt))
-        self._status(peer, msg.session, proto.RIG_READY, latency=latency, mode=msg.u)
+        self._status(peer, msg.session, proto.RIG_READY, latency=latency, mode=msg.u, horizon=self.session.horizon)
         if opening:
             self.announce(f"session {self.session.number} opened by {peer[0]}:{peer[1]} "
                           f"({'rig' if msg.u == proto.PACED_BY_RIG else 'model'}-paced, dt {msg.a:g} s)")
@@ -342,31 +365,49 @@ class RigEmulator:
     def _command(self, msg: proto.Message, peer) -> None:
         """Model-paced (lockstep): one step of the rig and the pantograph per COMMAND, answered by a FORCE.
         A COMMAND whose seq is not above the newest executed one (a duplicate, a late one or a replay,
-        authenticated or not) is never executed: counted `replayed`, not answered."""
+        authenticated or not) is never executed: counted `replayed`, not answered. Steps skipped (COMMANDs
+        lost) are executed first, with the heights the newest executed COMMAND carries for them (or held)."""
         s = self.session
-        if msg.seq <= s.last_seq:
-            s.replayed += 1
-            self.stats.replayed += 1
+        if msg.seq <= s.last_seq or len(msg.ahead) >= s.horizon:
+            s.replayed += msg.seq <= s.last_seq
+            self.stats.replayed += msg.seq <= s.last_seq
+            self.stats.malformed += msg.seq > s.last_seq  # more heights than the session's horizon
             return
+        for skipped in range(max(s.last_seq + 1, msg.seq - WINDOW), msg.seq):
+            z = s.height_for(skipped, s.last_seq, 0)
+            self._rig_step(self._z if z is None else z)
         s.last_seq = msg.seq
+        s.heights = (msg.a, *(h for h, _ in msg.ahead))
+        s.height_for(msg.seq, msg.seq, 0)  # counted fresh
         self.stats.commands += 1
         self.session.commands += 1
-        self._record_command(msg.a)
-        z_act = self.rig.height(msg.a)
-        f = self.rig.force(self.pan.step(z_act))
+        z_act, f = self._rig_step(msg.a)
         self.stats.answers += 1
+        t = s.ticks
         self._answer(proto.encode(proto.Message(proto.FORCE, msg.seq, msg.t_ns, a=f, b=z_act, u=proto.RIG_RUNNING,
-                                                session=msg.session), self.key), peer)
+                                                session=msg.session, fresh=t["fresh"], predicted=t["predicted"],
+                                                uncovered=t["uncovered"]), self.key), peer)
+
+    def _rig_step(self, z_ref: float) -> tuple[float, float]:
+        """One step of the rig and the pantograph at reference z_ref: the actuator height and the measured force."""
+        self._record_command(z_ref)
+        z_act = self.rig.height(z_ref)
+        return z_act, self.rig.force(self.pan.step(z_act))
 
     def _take_answer(self, msg: proto.Message, p: PacedState) -> None:
         """Rig-paced: ANSWER 0 starts the loop; an answer to a sample is timed and, if it is the
         newest, becomes the reference of the next tick."""
         now = time.perf_counter_ns()
+        s = self.session
+        if len(msg.ahead) >= s.horizon:
+            self.stats.malformed += 1  # more heights than the session's horizon
+            return
         if p.clock is None:
             if msg.seq == 0:
                 pc = self.pacing
                 p.clock = RigClock(self.dt, now, pc.drift_ppm, pc.jitter_us, pc.seed, pc.slow_motion)
                 p.z_ref = msg.a
+                s.heights = (msg.a, *(h for h, _ in msg.ahead))
             return
         sent = p.sent_ns.pop(msg.seq, None)
         if sent is None:
@@ -379,23 +420,25 @@ class RigEmulator:
         p.answer_us.add((now - sent) / 1e3)
         if msg.seq > p.newest:
             p.newest = msg.seq
-            p.z_ref = msg.a
+            s.heights = (msg.a, *(h for h, _ in msg.ahead))
             self.stats.commands += 1
-            self.session.commands += 1
-            self._record_command(msg.a)
+            s.commands += 1
 
     def _tick(self, p: PacedState) -> None:
-        """One tick of the rig's main loop: the newest answer moves the actuator, the force is
-        measured and sent as a SAMPLE."""
+        """One tick of the rig's main loop: the tick's height from the newest answer that covers it (else
+        the actuator holds), the force measured and sent as a SAMPLE with the tick counts."""
         now = time.perf_counter_ns()
         p.tick_late_us.add(max(now - p.clock.due_ns, 0) / 1e3)
         k = p.clock.advance()
-        if k >= 2 and p.newest < k - 1:
-            p.reused += 1  # the answer to the previous sample has not come: the old reference again
-        z_act = self.rig.height(p.z_ref)
-        f = self.rig.force(self.pan.step(z_act))
+        s = self.session
+        z = s.height_for(k, p.newest, 1)
+        if z is not None:
+            p.z_ref = z
+        z_act, f = self._rig_step(p.z_ref)
+        t = s.ticks
         sample = proto.Message(proto.SAMPLE, k, p.clock.rig_time_ns(k), a=f, b=z_act, u=proto.RIG_RUNNING,
-                               w=p.reused, session=self.session.id)
+                               w=t["uncovered"], session=s.id, fresh=t["fresh"], predicted=t["predicted"],
+                               uncovered=t["uncovered"])
         p.sent_ns[k] = time.perf_counter_ns()
         self._answer(proto.encode(sample, self.key), self.session.peer)
         p.samples += 1
@@ -414,7 +457,8 @@ class RigEmulator:
         if len(self._ended_ids) > ENDED_SESSIONS:
             self._ended_ids.popitem(last=False)
         rec = self.stats.session_log[-1]
-        paced = (f", {rec['samples']} samples, {rec['answered']} answered, {rec['reused']} reused, answer p50 "
+        paced = (f", {rec['samples']} samples, {rec['answered']} answered, ticks {rec['fresh']} fresh "
+                 f"{rec['predicted']} predicted {rec['uncovered']} uncovered, answer p50 "
                  f"{rec['answer_us']['p50']:.0f} us p99 {rec['answer_us']['p99']:.0f} us max "
                  f"{rec['answer_us']['max']:.0f} us") if s.paced is not None else ""
         self.announce(f"session {s.number} closed ({end}): {s.commands} commands{paced}, {s.foreign} foreign "

@@ -345,9 +345,14 @@ def test_the_emulator_refuses_bad_values_and_other_versions(tmp_path):
             assert status.type == proto.STATUS and status.u == proto.RIG_FAULT and status.w == proto.FAULT_BAD_HELLO
         status = _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=0.001, session=0))  # no session id
         assert status.w == proto.FAULT_BAD_HELLO
+        status = _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=0.001, session=6, horizon=65))
+        assert status.w == proto.FAULT_BAD_HELLO | proto.FAULT_HORIZON and status.horizon == 0
         v1 = struct.Struct("<IBBHIQddII").pack(proto.MAGIC, 1, proto.HELLO, 0, 0, 0, 0.001, 0.0, 0, 0)
         sock.sendto(v1 + struct.pack("<I", zlib.crc32(v1)), peer)
-        assert sock.recvfrom(2048)[0] == proto.v1_refusal()
+        assert sock.recvfrom(2048)[0] == proto.old_refusal(1)
+        v2 = struct.Struct("<IBBHQIQdddII").pack(proto.MAGIC, 2, proto.HELLO, 0, 99, 0, 0, 0.001, 0.0, 0.0, 0, 0)
+        sock.sendto(v2 + struct.pack("<I", zlib.crc32(v2)), peer)
+        assert sock.recvfrom(2048)[0] == proto.old_refusal(2, 99)
         sid = proto.new_session_id()
         assert _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=0.001, session=sid)).w == 0
         for z in (math.nan, math.inf, -math.inf):
@@ -359,7 +364,7 @@ def test_the_emulator_refuses_bad_values_and_other_versions(tmp_path):
         emu.wait_for("session 1 closed")
     finally:
         stats = emu.stop()
-    assert stats["nonfinite"] == 2 + 4 and stats["bad_hello"] == 4 and stats["old_version"] == 1
+    assert stats["nonfinite"] == 2 + 4 and stats["bad_hello"] == 5 and stats["old_version"] == 2
     assert stats["commands"] == 1 and stats["max_abs_height_m"] == 0.02 and stats["sessions"] == 1
 
 
@@ -470,7 +475,10 @@ def test_a_rig_paced_run_consumes_and_answers_every_rig_sample_once(tmp_path, ma
     assert link["samples"] == link["answered"] == steps and link["lost"] == 0 and link["duplicated"] == 0
     assert rig["answered"] == steps and rig["unanswered"] == 0 and rig["doubled"] == 0
     assert rig["samples"] == steps + rig["after_last_answer"]
-    assert link["reused"] <= rig["reused"] <= rig["samples"]  # the adapter reports the rig's count
+    # every tick is counted once, fresh, predicted or uncovered; the adapter reports the rig's counts
+    assert rig["fresh"] + rig["predicted"] + rig["uncovered"] == rig["samples"]
+    assert all(link[c] <= rig[c] for c in ("fresh", "predicted", "uncovered"))
+    assert link["fresh"] + link["predicted"] + link["uncovered"] >= steps - 1
     a = link["answer_us"]
     assert 0 < a["p50"] <= a["p99"] <= a["max"]
     adapter = mcap_rows(out / "run.mcap", "/adapter")  # both sides, per sample
