@@ -212,8 +212,8 @@ class PantohilCatenary(PantohilSlave):
         if self._hil is None:
             return 0.0
         if self._ahead is None:
-            self._ahead = self._hil.ahead(max(int(self.horizon_steps) - 1, 1))
-        return float(self._ahead[min(i, len(self._ahead)) - 1])
+            self._ahead = self._hil.ahead(max(int(self.horizon_steps) - 1, 1)).tolist()
+        return self._ahead[min(i, len(self._ahead)) - 1]
 
     # Per-step outputs other than the command are read from the iteration's state when a master asks
     # for them, so that do_step does only the work of the loop.

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import hmac
+import itertools
 import math
 import secrets
 import struct
@@ -114,7 +115,7 @@ def _extension(m: Message) -> bytes:
     if m.type in (HELLO, STATUS):
         return _HORIZON.pack(m.horizon & 0xFFFFFFFF)
     if m.type in (COMMAND, ANSWER):
-        return b"".join(_AHEAD.pack(h, v) for h, v in m.ahead)
+        return struct.pack(f"<{2 * len(m.ahead)}d", *itertools.chain.from_iterable(m.ahead))
     if m.type in (FORCE, SAMPLE):
         return _COUNTS.pack(m.fresh & 0xFFFFFFFF, m.predicted & 0xFFFFFFFF, m.uncovered & 0xFFFFFFFF)
     return b""

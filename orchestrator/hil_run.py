@@ -30,6 +30,7 @@ from pantohil.builder.system import (
     FMU_NAMES,
     HARDWARE_CONNECTIONS,
     HARDWARE_FMU_NAMES,
+    HORIZON_OUTPUTS,
     loop_latency_steps,
 )
 from pantohil.models.case import Case, CaseError
@@ -226,6 +227,9 @@ def run_topology(case: Case, options: RunOptions) -> Topology:
         raise CaseError(f"run.duration_s: {run['duration_s']:g} s is {duration_spans} spans, more than "
                         f"run.max_spans = {run['max_spans']}")
     topology = HARDWARE if options.hardware is not None else VIRTUAL
+    if options.hardware is not None:  # only the horizon's H - 1 heights are connected (and read each step)
+        ahead = set(HORIZON_OUTPUTS[case.horizon_steps - 1:])
+        topology = replace(topology, connections=tuple(c for c in topology.connections if c[1] not in ahead))
     if rig_paced:
         topology = replace(topology, groups={**topology.groups, "/adapter": {**topology.groups["/adapter"],
                                                                              **RIG_PACED_FIELDS}})

@@ -59,14 +59,19 @@ class Limiter:
         """Whether the limiter would pass every wanted height unchanged: finite, within the stroke, and
         within the velocity, acceleration and braking limits of __call__, step after step."""
         lim, dt = self.lim, self.dt
-        if not (np.all(np.isfinite(w)) and np.all(w >= lim.stroke_min_m) and np.all(w <= lim.stroke_max_m)):
+        low, high = float(w.min(initial=self.z)), float(w.max(initial=self.z))  # NaN compares False below
+        if not (lim.stroke_min_m <= low and high <= lim.stroke_max_m):
             return False
-        z_prev = np.concatenate(([self.z], w[:-1]))
-        v = (w - z_prev) / dt
-        v_prev = np.concatenate(([self.v], v[:-1]))
+        v = np.diff(w, prepend=self.z) / dt
+        dv_all = np.diff(v, prepend=self.v)
         a, dv = lim.max_acceleration_m_s2, lim.max_acceleration_m_s2 * dt
-        if np.any(np.abs(v - v_prev) > dv * (1 - 1e-9)) or np.any(np.abs(v) > lim.max_velocity_m_s * (1 - 1e-9)):
+        v_max = float(np.abs(v).max())
+        if float(np.abs(dv_all).max()) > dv * (1 - 1e-9) or v_max > lim.max_velocity_m_s * (1 - 1e-9):
             return False
+        if min(lim.stroke_max_m - high, low - lim.stroke_min_m) > v_max ** 2 / a + 2 * (v_max + dv) * dt:
+            return True  # far from both stroke ends: braking cannot bind
+        z_prev = np.concatenate(([self.z], w[:-1]))
+        v_prev = v - dv_all
         def brake(d):
             return np.maximum(0.0, np.sqrt(np.maximum(2 * a * d + (a * dt / 2) ** 2, 0.0)) - a * dt / 2)
         up = brake(lim.stroke_max_m - z_prev - v * dt)

@@ -202,6 +202,21 @@ def test_model_paced_session_horizon_counts_and_replay(start_rig):
     m.close()
 
 
+def test_more_heights_than_the_session_s_horizon_are_malformed(start_rig):
+    rig = start_rig(paced_by="model")
+    m = Master(rig.port)
+    assert m.hello(horizon=4).horizon == 4
+    m.command(1, heights_from(1, 5))  # 5 heights in a session of 4: not taken, not answered
+    m.command(1, heights_from(1, 4))
+    f = m.recv()
+    assert (f.seq, f.b, f.fresh, f.predicted, f.uncovered) == (1, 1e-3, 1, 0, 0)
+    m.send(proto.BYE)
+    rig.line("closed")
+    stats = rig.stop()
+    assert (stats["malformed"], stats["commands"], stats["answers"]) == (1, 1, 1)
+    m.close()
+
+
 def _v2_hello(session: int) -> bytes:
     body = struct.pack("<IBBHQIQdddII", proto.MAGIC, 2, proto.HELLO, 0, session, 0, 0, 1e-3, 0.0, 0.0, 0, 0)
     return body + struct.pack("<I", zlib.crc32(body))
