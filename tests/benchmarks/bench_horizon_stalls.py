@@ -5,7 +5,8 @@ Runs the in-process virtual HIL of the case (the reference), then rig-paced fixe
 the free-running emulator: one without stalls and, per repeat, one whose master process this script
 stops (SIGSTOP/SIGCONT, seeded) for --stall-ms LO HI every --every-s LO HI, and optionally one with a
 single long stall (--long-stall-s, e.g. 3 H dt). Prints per run the stalls made (count, longest), the
-rig's tick counts (fresh, predicted, uncovered), the answer time p50/p99/max, and the rms difference
+rig's tick counts up to the model's last sample (fresh, predicted, uncovered; the ticks after the
+last answer, while the master closes, are counted apart), the answer time p50/p99/max, and the rms difference
 of the converged span from the no-stall run's and from the virtual HIL's, in % of the std. Notes the
 machine's load. Not a timed test.
 
@@ -31,6 +32,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_rig_paced import case_sets, cli, start_emulator  # noqa: E402
+
+TICKS = ("fresh", "predicted", "uncovered")  # the rig's counts in its last SAMPLE the model took
 
 
 def rms_pct(f: np.ndarray, ref: np.ndarray) -> float:
@@ -98,8 +101,9 @@ def one_run(tmp: Path, args, tag: str, spans: int, stall: dict | None) -> dict:
     rig = json.loads(stats_path.read_text())["session_log"][-1]
     return {"tag": tag, "exit": proc.returncode, "status": summary["status"], "spans": summary["spans"],
             "message": summary.get("message", ""), "stderr": stderr.strip()[-300:],
-            "stalls": staller.stalls if staller else [], "fresh": rig["fresh"], "predicted": rig["predicted"],
-            "uncovered": rig["uncovered"], "samples": rig["samples"], "answer_us": summary["link"]["answer_us"],
+            "stalls": staller.stalls if staller else [], **{c: summary["link"][c] for c in TICKS},
+            "samples": summary["link"]["samples"], "after_last_answer": rig["after_last_answer"],
+            "rig_uncovered": rig["uncovered"], "answer_us": summary["link"]["answer_us"],
             "span": span(out) if summary["spans"] else None, "load": (load_before, load_after),
             "horizon_steps": rig["horizon_steps"]}
 
@@ -109,8 +113,10 @@ def report(row: dict, reference: np.ndarray | None, virtual: np.ndarray) -> None
     vs_ref = rms_pct(row["span"], reference) if reference is not None and row["span"] is not None else float("nan")
     vs_virtual = rms_pct(row["span"], virtual) if row["span"] is not None else float("nan")
     print(f"{row['tag']}: exit {row['exit']}, {row['status']}, {row['spans']} spans; H = {row['horizon_steps']}; "
-          f"{len(stalls)} stalls (longest {1e3 * max(stalls, default=0):.1f} ms); rig ticks {row['samples']}: "
-          f"fresh {row['fresh']}, predicted {row['predicted']}, uncovered {row['uncovered']}; answer p50/p99/max "
+          f"{len(stalls)} stalls (longest {1e3 * max(stalls, default=0):.1f} ms); rig ticks up to the model's "
+          f"last sample {row['samples']}: fresh {row['fresh']}, predicted {row['predicted']}, uncovered "
+          f"{row['uncovered']} (the rig ticked {row['after_last_answer']} more after the last answer, "
+          f"{row['rig_uncovered'] - row['uncovered']} of them uncovered); answer p50/p99/max "
           f"{a['p50']:.0f}/{a['p99']:.0f}/{a['max']:.0f} us; converged span vs no-stall run {vs_ref:.4f} %, vs "
           f"virtual HIL {vs_virtual:.4f} % of the std; load {row['load'][0]:.1f} -> {row['load'][1]:.1f}"
           + (f"; stderr: {row['stderr']}" if row["exit"] not in (0,) else ""), flush=True)

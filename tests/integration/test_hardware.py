@@ -516,3 +516,38 @@ def test_a_rig_that_stops_sending_samples_is_a_link_fault(tmp_path):
     assert summary["status"] == "link_lost"
     held = [row["command_sent"] for row in mcap_rows(out / "run.mcap", "/adapter") if row["link_state"] == 2]
     assert held and len(set(held)) == 1
+
+
+@pytest.mark.network
+@pytest.mark.parametrize("pacing", ["model", "rig"])
+def test_the_emulator_takes_a_late_ticks_height_from_the_newest_answers_horizon(tmp_path, pacing):
+    """docs/udp-protocol.md, "Which height a tick takes": rig-paced, ANSWER 0 of 8 heights covers ticks 1-8
+    (1 fresh, 7 predicted) and nothing covers tick 9 on (uncovered, held); lockstep, COMMAND 1 of 8 heights
+    covers the skipped steps 2-8, and steps 9-10 are held, before COMMAND 11 (fresh). The counts depend
+    on which answers came, never on when."""
+    emu = Emulator(tmp_path, "--paced-by", pacing, *(("--slow-motion", "5") if pacing == "rig" else ()))
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.settimeout(30.0)
+    peer, sid = ("127.0.0.1", emu.port), proto.new_session_id()
+    mode = proto.PACED_BY_RIG if pacing == "rig" else proto.PACED_BY_MODEL
+    heights = tuple((0.001 * i, 0.0) for i in range(2, 9))
+    try:
+        status = _ask(sock, peer, proto.Message(proto.HELLO, 0, 0, a=0.001, u=mode, session=sid, horizon=8))
+        assert (status.w, status.horizon) == (0, 8)
+        if pacing == "rig":
+            sock.sendto(proto.encode(proto.Message(proto.ANSWER, 0, 0, a=0.001, session=sid, ahead=heights)), peer)
+            while (m := proto.decode(sock.recvfrom(4096)[0])).seq < 12:  # no sample is answered
+                assert m.type == proto.SAMPLE
+            counts = (m.fresh, m.predicted, m.uncovered)
+            assert counts == (1, 7, 4) and m.w == 4
+        else:
+            first = _ask(sock, peer, proto.Message(proto.COMMAND, 1, 0, a=0.001, session=sid, ahead=heights))
+            assert (first.seq, first.fresh, first.predicted, first.uncovered) == (1, 1, 0, 0)
+            m = _ask(sock, peer, proto.Message(proto.COMMAND, 11, 0, a=0.011, session=sid))
+            assert (m.seq, m.fresh, m.predicted, m.uncovered) == (11, 2, 7, 2)
+        sock.sendto(proto.encode(proto.Message(proto.BYE, 99, 0, session=sid)), peer)
+        emu.wait_for("session 1 closed")
+    finally:
+        stats = emu.stop()
+    log = stats["session_log"][0]
+    assert log["horizon_steps"] == 8 and log["predicted"] == 7
