@@ -2,8 +2,8 @@
 
 Each step it gives the commanded height and the horizon after it (height_ahead_1 ..) to its link client
 (`link_client.LinkClient`: the session, both pacings, the actuator limits, every counter) and outputs
-the rig's measured force and the link's counters. The link's state (session, socket, counters) is not
-part of an FMU state: a rig cannot be rolled back.
+the rig's measured force and the link's counters. An FMU state holds the link client's counters, limiter
+and session bookkeeping; its socket is shared with the live instance (`constants`), never copied.
 """
 from __future__ import annotations
 
@@ -104,7 +104,6 @@ class PantohilAdapter(PantohilSlave):
     """The hardware adapter FMU: the UDP link to a rig controller, within the actuator's limits."""
     author = "pantohil"
     description = "Hardware adapter: UDP link from the catenary model to a HIL rig controller, with actuator limits."
-    transient = ("_client",)  # the session and its socket are not part of an FMU state
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -132,6 +131,11 @@ class PantohilAdapter(PantohilSlave):
         ahead = [getattr(self, name) for name in _AHEAD_INPUTS[:max(c.horizon - 1, 0)]]
         c.step(self.height_command, ahead)
         return True
+
+    def constants(self) -> dict[str, object]:
+        """The link's socket: shared by the live instance and its states, never copied or serialized."""
+        sock = None if self._client is None else self._client._sock
+        return {} if sock is None else {"link.socket": sock}
 
     def terminate(self):
         """Send BYE to the rig and close the socket."""

@@ -25,6 +25,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "fmi2Functions.h"
 
@@ -228,10 +229,61 @@ static int load_inner(const fmi2CallbackFunctions *cb, fmi2String name) {
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
+static int hex_value(char c) {
+    if (c >= '0' && c <= '9') return c - '0';
+    if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+    if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+    return -1;
+}
+
+/* Any valid `file` URI of a local folder (RFC 8089: file:/p, file:///p, file://localhost/p, with
+   percent-encoded octets) as the one form pythonfmu's library reads, "file://" followed by the decoded
+   path (it strips "file://" and uses the rest as a path). 0 (and a logged message) for a URI that is
+   not a local file URI or does not fit. */
+static int local_file_uri(const char *uri, char *out, size_t size, const fmi2CallbackFunctions *cb,
+                          fmi2String name) {
+    const char *path;
+    size_t n = 7;
+    if (uri == NULL || strncasecmp(uri, "file:", 5) != 0) {
+        say(cb, name, fmi2Error, "fmuResourceLocation %s: not a file URI", uri ? uri : "(null)");
+        return 0;
+    }
+    path = uri + 5;
+    if (strncmp(path, "//", 2) == 0) {  /* an authority: empty or localhost */
+        path += 2;
+        if (strncasecmp(path, "localhost/", 10) == 0)
+            path += 9;
+        else if (path[0] != '/') {
+            say(cb, name, fmi2Error, "fmuResourceLocation %s: a file URI of another host", uri);
+            return 0;
+        }
+    }
+    if (path[0] != '/') {
+        say(cb, name, fmi2Error, "fmuResourceLocation %s: a file URI needs an absolute path", uri);
+        return 0;
+    }
+    memcpy(out, "file://", 7);
+    for (; *path != '\0' && n + 1 < size; n++) {
+        if (path[0] == '%' && hex_value(path[1]) >= 0 && hex_value(path[2]) >= 0) {
+            out[n] = (char)(hex_value(path[1]) * 16 + hex_value(path[2]));
+            path += 3;
+        } else {
+            out[n] = *path++;
+        }
+    }
+    out[n] = '\0';
+    if (*path != '\0' || memchr(out, '\0', n) != NULL) {
+        say(cb, name, fmi2Error, "fmuResourceLocation %s: too long, or it encodes a NUL byte", uri);
+        return 0;
+    }
+    return 1;
+}
+
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String resources,
                               const fmi2CallbackFunctions *callbacks, fmi2Boolean visible, fmi2Boolean logging) {
     Instance *inst;
-    if (!load_inner(callbacks, name))
+    char location[MESSAGE_SIZE];
+    if (!load_inner(callbacks, name) || !local_file_uri(resources, location, sizeof location, callbacks, name))
         return NULL;
     inst = (Instance *)calloc(1, sizeof *inst);
     if (inst == NULL)
@@ -242,7 +294,7 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     inst->wrapped.componentEnvironment = inst;
     inst->host_logging = logging;
     inst->name = strdup(name ? name : "");
-    inst->inner = py.instantiate(name, type, guid, resources, &inst->wrapped, visible, fmi2True);
+    inst->inner = py.instantiate(name, type, guid, location, &inst->wrapped, visible, fmi2True);
     if (inst->inner == NULL) {
         say(callbacks, name, fmi2Error, "pantohil FMU: its Python class could not be created (see the message "
             "before); the embedded Python needs numpy and scipy (PYTHONHOME=%s, PYTHONPATH=%s)",
@@ -256,6 +308,11 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
 
 #define INNER(c) (((Instance *)(c))->inner)
 
+/* pythonfmu reports any exception of the model's Python code as fmi2Fatal. It concerns that instance
+   only: the interpreter and the other instances go on, and the instance can be reset or freed, which is
+   fmi2Error in FMI 2.0 (sec. 2.1.3); fmi2Fatal is kept for the loader's own failures (no interpreter). */
+static fmi2Status error_not_fatal(fmi2Status status) { return status == fmi2Fatal ? fmi2Error : status; }
+
 void fmi2FreeInstance(fmi2Component c) {
     Instance *inst = (Instance *)c;
     if (inst == NULL)
@@ -267,20 +324,20 @@ void fmi2FreeInstance(fmi2Component c) {
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String categories[]) {
     ((Instance *)c)->host_logging = on;
-    return py.set_debug_logging(INNER(c), fmi2True, n, categories);
+    return error_not_fatal(py.set_debug_logging(INNER(c), fmi2True, n, categories));
 }
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_defined, fmi2Real tol, fmi2Real start,
                                fmi2Boolean stop_defined, fmi2Real stop) {
-    return py.setup_experiment(INNER(c), tol_defined, tol, start, stop_defined, stop);
+    return error_not_fatal(py.setup_experiment(INNER(c), tol_defined, tol, start, stop_defined, stop));
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component c) { return py.enter_initialization_mode(INNER(c)); }
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) { return error_not_fatal(py.enter_initialization_mode(INNER(c))); }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     Instance *inst = (Instance *)c;
     const fmi2ValueReference vr = PANTOHIL_TIME_STEP_VR;
-    fmi2Status status = py.exit_initialization_mode(inst->inner);
+    fmi2Status status = error_not_fatal(py.exit_initialization_mode(inst->inner));
     if (status <= fmi2Warning && py.get_real(inst->inner, &vr, 1, &inst->time_step_s) > fmi2Warning)
         inst->time_step_s = 0.0;
     return status;
@@ -304,75 +361,75 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean no_se
             "it, a last step below 1e-3 of it is taken with no model step)", t, h, dt);
         return fmi2Error;
     }
-    return py.do_step(inst->inner, t, dt, no_set_prior);
+    return error_not_fatal(py.do_step(inst->inner, t, dt, no_set_prior));
 }
 
-fmi2Status fmi2Terminate(fmi2Component c) { return py.terminate(INNER(c)); }
-fmi2Status fmi2Reset(fmi2Component c) { ((Instance *)c)->time_step_s = 0.0; return py.reset(INNER(c)); }
+fmi2Status fmi2Terminate(fmi2Component c) { return error_not_fatal(py.terminate(INNER(c))); }
+fmi2Status fmi2Reset(fmi2Component c) { ((Instance *)c)->time_step_s = 0.0; return error_not_fatal(py.reset(INNER(c))); }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
-    return py.get_real(INNER(c), vr, n, v);
+    return error_not_fatal(py.get_real(INNER(c), vr, n, v));
 }
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
-    return py.get_integer(INNER(c), vr, n, v);
+    return error_not_fatal(py.get_integer(INNER(c), vr, n, v));
 }
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) {
-    return py.get_boolean(INNER(c), vr, n, v);
+    return error_not_fatal(py.get_boolean(INNER(c), vr, n, v));
 }
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]) {
-    return py.get_string(INNER(c), vr, n, v);
+    return error_not_fatal(py.get_string(INNER(c), vr, n, v));
 }
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
-    return py.set_real(INNER(c), vr, n, v);
+    return error_not_fatal(py.set_real(INNER(c), vr, n, v));
 }
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Integer v[]) {
-    return py.set_integer(INNER(c), vr, n, v);
+    return error_not_fatal(py.set_integer(INNER(c), vr, n, v));
 }
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Boolean v[]) {
-    return py.set_boolean(INNER(c), vr, n, v);
+    return error_not_fatal(py.set_boolean(INNER(c), vr, n, v));
 }
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2String v[]) {
-    return py.set_string(INNER(c), vr, n, v);
+    return error_not_fatal(py.set_string(INNER(c), vr, n, v));
 }
 
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) { return py.get_fmu_state(INNER(c), s); }
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) { return py.set_fmu_state(INNER(c), s); }
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) { return py.free_fmu_state(INNER(c), s); }
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *s) { return error_not_fatal(py.get_fmu_state(INNER(c), s)); }
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate s) { return error_not_fatal(py.set_fmu_state(INNER(c), s)); }
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *s) { return error_not_fatal(py.free_fmu_state(INNER(c), s)); }
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate s, size_t *size) {
-    return py.serialized_fmu_state_size(INNER(c), s, size);
+    return error_not_fatal(py.serialized_fmu_state_size(INNER(c), s, size));
 }
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate s, fmi2Byte bytes[], size_t size) {
-    return py.serialize_fmu_state(INNER(c), s, bytes, size);
+    return error_not_fatal(py.serialize_fmu_state(INNER(c), s, bytes, size));
 }
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate *s) {
-    return py.deserialize_fmu_state(INNER(c), bytes, size, s);
+    return error_not_fatal(py.deserialize_fmu_state(INNER(c), bytes, size, s));
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
                                         const fmi2ValueReference z[], size_t nz, const fmi2Real dv[], fmi2Real dz[]) {
-    return py.get_directional_derivative(INNER(c), u, nu, z, nz, dv, dz);
+    return error_not_fatal(py.get_directional_derivative(INNER(c), u, nu, z, nz, dv, dz));
 }
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                        const fmi2Integer order[], const fmi2Real v[]) {
-    return py.set_real_input_derivatives(INNER(c), vr, n, order, v);
+    return error_not_fatal(py.set_real_input_derivatives(INNER(c), vr, n, order, v));
 }
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                         const fmi2Integer order[], fmi2Real v[]) {
-    return py.get_real_output_derivatives(INNER(c), vr, n, order, v);
+    return error_not_fatal(py.get_real_output_derivatives(INNER(c), vr, n, order, v));
 }
-fmi2Status fmi2CancelStep(fmi2Component c) { return py.cancel_step(INNER(c)); }
+fmi2Status fmi2CancelStep(fmi2Component c) { return error_not_fatal(py.cancel_step(INNER(c))); }
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) {
-    return py.get_status(INNER(c), k, v);
+    return error_not_fatal(py.get_status(INNER(c), k, v));
 }
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
-    return py.get_real_status(INNER(c), k, v);
+    return error_not_fatal(py.get_real_status(INNER(c), k, v));
 }
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) {
-    return py.get_integer_status(INNER(c), k, v);
+    return error_not_fatal(py.get_integer_status(INNER(c), k, v));
 }
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v) {
-    return py.get_boolean_status(INNER(c), k, v);
+    return error_not_fatal(py.get_boolean_status(INNER(c), k, v));
 }
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) {
-    return py.get_string_status(INNER(c), k, v);
+    return error_not_fatal(py.get_string_status(INNER(c), k, v));
 }

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import urllib.parse
 import sys
 import zipfile
 from pathlib import Path
@@ -189,3 +190,30 @@ def test_simulate_fmu_takes_step_and_stop_time_from_the_model_description(tmp_pa
         words = run.stdout.split()
         assert words[:2] == ["steps", "936"] and run.returncode == 0, run.stdout + run.stderr
         assert float(words[3]) == pytest.approx(0.001, rel=1e-9) and float(words[5]) == pytest.approx(0.936, rel=1e-9)
+
+
+@pytest.mark.slow
+def test_c_host_instantiates_with_every_form_of_a_local_file_uri(host, default_run, tmp_path):
+    """RFC 8089's forms of a local folder's URI (file:/p, file:///p, file://localhost/p) and paths with
+    spaces and non-ASCII characters, raw or percent-encoded, all reach the FMU's resources; another
+    host's URI is refused with a message (builder/loader/fmu_loader.c, local_file_uri)."""
+    folder = tmp_path / "pantograph"
+    with zipfile.ZipFile(default_run / "fmus" / "pantograph.fmu") as z:
+        z.extractall(folder)
+    md = read_model_description(str(default_run / "fmus" / "pantograph.fmu"))
+    odd = tmp_path / "a folder with spaces" / "r\u00e9sum\u00e9 \u00fc"
+    odd.mkdir(parents=True)
+    (odd / "resources").symlink_to(folder / "resources", target_is_directory=True)
+    res = f"{folder}/resources"
+    encoded = urllib.parse.quote(f"{odd}/resources")
+    forms = [f"file:{res}", f"file://{res}", f"file://localhost{res}", f"FILE://LOCALHOST{res}",
+             f"file://{odd}/resources", f"file://{encoded}", Path(f"{odd}/resources").as_uri()]
+    lines = [f"fmu {folder} {md.coSimulation.modelIdentifier} {md.guid}" for _ in forms]
+    lines += [f"uri {i} {uri}" for i, uri in enumerate(forms)]
+    plan = tmp_path / "plan.txt"
+    plan.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    _run_host(host, plan)  # every instance made and initialised: exit 0
+    plan.write_text(f"fmu {folder} {md.coSimulation.modelIdentifier} {md.guid}\nuri 0 file://elsewhere{res}\n")
+    env = {k: v for k, v in os.environ.items() if k not in PYTHON_VARIABLES}
+    proc = subprocess.run([str(host), str(plan)], env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 3 and "a file URI of another host" in proc.stdout + proc.stderr

@@ -4,6 +4,8 @@
 
    Plan file, one directive a line:
      fmu DIR MODEL_IDENTIFIER GUID          (an extracted FMU; index 0, 1, ... in order)
+     uri FMU URI                            (its fmuResourceLocation, the rest of the line; default
+                                             file://DIR/resources)
      connect SRC OUT_VR DST IN_VR           (a Real output to a Real input)
      record FMU VR                          (the Real output printed, one value a line)
      steps K / step DT / last N             (K steps of DT; print the last N recorded values)
@@ -22,7 +24,7 @@
 #define MAX_LINKS 16
 
 typedef struct {
-    char dir[2048], id[256], guid[256];
+    char dir[2048], id[256], guid[256], uri[4096];
     fmi2Component c;
     fmi2InstantiateTYPE *instantiate;
     fmi2SetupExperimentTYPE *setup;
@@ -67,7 +69,10 @@ static void load(Fmu *f, const fmi2CallbackFunctions *cb) {
     f->get_real = symbol(lib, "fmi2GetReal");
     f->set_real = symbol(lib, "fmi2SetReal");
     f->terminate = symbol(lib, "fmi2Terminate");
-    snprintf(resources, sizeof resources, "file://%s/resources", f->dir);
+    if (f->uri[0] != '\0')
+        snprintf(resources, sizeof resources, "%s", f->uri);
+    else
+        snprintf(resources, sizeof resources, "file://%s/resources", f->dir);
     f->c = f->instantiate(f->id, fmi2CoSimulation, f->guid, resources, cb, fmi2False, fmi2False);
     if (f->c == NULL) { fprintf(stderr, "fmi2Instantiate of %s failed\n", f->id); exit(3); }
     if (f->setup(f->c, fmi2False, 0.0, 0.0, fmi2False, 0.0) > fmi2Warning || f->enter(f->c) > fmi2Warning
@@ -82,7 +87,8 @@ int main(int argc, char **argv) {
     static Fmu fmus[MAX_FMUS];
     static Link links[MAX_LINKS];
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
-    int n_fmus = 0, n_links = 0, rec_fmu = -1, wrong_fmu = -1;
+    int n_fmus = 0, n_links = 0, rec_fmu = -1, wrong_fmu = -1, uri_fmu = -1;
+    static char uri[4096];
     fmi2ValueReference rec_vr = 0;
     long steps = 0, last = 1, k;
     double dt = 0.0, wrong_h = 0.0, *recorded;
@@ -99,6 +105,8 @@ int main(int argc, char **argv) {
         else if (sscanf(line, "step %lf", &dt) == 1) {}
         else if (sscanf(line, "last %ld", &last) == 1) {}
         else if (sscanf(line, "wrong_step %d %lf", &wrong_fmu, &wrong_h) == 2) {}
+        else if (sscanf(line, "uri %d %4095[^\n]", &uri_fmu, uri) == 2 && uri_fmu >= 0 && uri_fmu < MAX_FMUS)
+            snprintf(fmus[uri_fmu].uri, sizeof fmus[uri_fmu].uri, "%s", uri);
     }
     fclose(plan);
     printf("python-loaded-before: %d\n", dlsym(RTLD_DEFAULT, "Py_IsInitialized") != NULL);
