@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import fmpy
+from pantohil.models.errors import SetupError
 
 SOURCE = Path(__file__).parent / "loader" / "fmu_loader.c"
 FMI_HEADERS = Path(fmpy.__file__).parent / "c-code"
@@ -25,7 +26,7 @@ PLATFORM = "linux64"  # the loader is built for the platform pantohil builds on
 INNER_SUFFIX = "_pythonfmu"  # pythonfmu's library becomes binaries/linux64/<modelIdentifier>_pythonfmu.so
 
 
-class LoaderError(RuntimeError):
+class LoaderError(SetupError):
     """The loader library could not be built; one line."""
 
 

@@ -19,6 +19,7 @@ from pantohil.models.parameters import fmu_keys, fmu_variable_names
 from pantohil.models.storage import atomic_path
 
 from .system import CONNECTIONS
+from pantohil.models.errors import InputError
 
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
@@ -178,7 +179,7 @@ def write_ssp(path: Path, name: str, fmus: dict[str, Path], parameters: dict[str
     return path
 
 
-class SspError(ValueError):
+class SspError(InputError):
     """An SSP file that cannot be run; one line."""
 
 

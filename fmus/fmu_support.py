@@ -19,6 +19,7 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variab
 
 from pantohil.fmus import state_codec
 from pantohil.models.parameters import AUTO, Key, fmu_keys, fmu_variable_names
+from pantohil.models.errors import InputError
 
 PARAMETERS_FILE = "parameters.json"
 REQUIREMENTS_FILE = "requirements.txt"  # what `pythonfmu deploy` installs on a host
@@ -129,7 +130,7 @@ _INSTANCE_ATTRIBUTES = frozenset({"vars", "log_queue", "instance_name", "resourc
                                   "default_experiment", "_declared", "_built"})
 
 
-class StateError(ValueError):
+class StateError(InputError):
     """A serialized FMU state that this FMU cannot take back."""
 
 

@@ -20,6 +20,7 @@ import sys
 from collections import OrderedDict, deque
 
 import numpy as np
+from pantohil.models.errors import InputError
 
 FORMAT = b"pantohil-fmu-state 2\n"
 _OWN_PACKAGE = "pantohil."
@@ -28,7 +29,7 @@ _NUMERIC_KINDS = "biufc"
 MAX_STATE_BYTES = 256 << 20
 
 
-class StateDataError(ValueError):
+class StateDataError(InputError):
     """A serialized state that is not valid state data; the text says why."""
 
 

@@ -25,6 +25,7 @@ from pathlib import Path
 
 from pantohil.models.hil.loop import MAX_HORIZON_STEPS
 from pantohil.models.input_files import InputFileError, read_input_bytes
+from pantohil.models.errors import InputError
 
 MAGIC = 0x31484850  # b"PHH1" little-endian (kept from version 1, so an old peer is recognised)
 VERSION = 3
@@ -53,7 +54,7 @@ _V1_BODY = struct.Struct("<IBBHIQddII")  # version 1, only to recognise and refu
 V1_SIZE = _V1_BODY.size + _CRC.size  # 48
 
 
-class Malformed(ValueError):
+class Malformed(InputError):
     """A datagram that is not a valid pantohil message; the text says why."""
 
 

@@ -37,12 +37,13 @@ from pantohil.models.rig.drive_chain import RigSpec, frequency_response
 from pantohil.models.rig.drive_chain import latency_steps as chain_latency_steps
 from pantohil.models.rig.drive_chain import pattern_spans as chain_pattern_spans
 from pantohil.models.rig.rig_file import RigFileError, load_rig_file
+from pantohil.models.errors import InputError
 
 _RIG_CHAIN_KEYS = ("delay_steps", "comm_decimation", "servo_bandwidth_hz", "servo_damping", "loadcell_cutoff_hz")
 DEFAULT_CASE = CASES_DIR / "asm_250.toml"
 
 
-class CaseError(ValueError):
+class CaseError(InputError):
     """A case that cannot run; the message is one line naming the key."""
 
 

@@ -16,6 +16,7 @@ import re
 import stat
 import tomllib
 from pathlib import Path
+from pantohil.models.errors import InputError
 
 MAX_INPUT_BYTES = 4 * 1024 * 1024
 MAX_NESTING = 32  # tables and lists inside each other; the shipped files nest at most 4 deep
@@ -25,7 +26,7 @@ _TOML_TOKEN = re.compile(r'"""(?:[^\\]|\\.)*?"""|\'\'\'.*?\'\'\'|"(?:[^"\\\n]|\\
                          re.S)
 
 
-class InputFileError(ValueError):
+class InputFileError(InputError):
     """An input file that cannot be read; one line naming the file."""
 
 

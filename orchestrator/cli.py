@@ -1,9 +1,10 @@
 """The `pantohil` command line.
 
 Exit codes: 0 success; 1 a run that did not converge (diverged, reached its span limit or lost
-contact), an FMU failure or a failed write (a full disk); 2 bad input (one line naming the key); 3 a
-lost hardware link; 130 / 143 / 129 a command stopped by SIGINT / SIGTERM / SIGHUP (a run's folder
-complete, status `interrupted`; any other command's output not written).
+contact), an FMU failure or a failed write (a full disk); 2 bad input (one line naming the key) or a
+missing tool (the C compiler); 3 a lost hardware link; 130 / 143 / 129 a command stopped by SIGINT /
+SIGTERM / SIGHUP (a run's folder complete, status `interrupted`; any other command's output not
+written). The codes and the errors that carry them: models/errors.py.
 """
 from __future__ import annotations
 
@@ -17,12 +18,10 @@ import tempfile
 from pathlib import Path
 
 from pantohil.models.case import CaseError, load_case
-from pantohil.models.catenary.fe.definition import CatenaryError
-from pantohil.models.catenary.profile import ProfileError
 from pantohil.models.data import catalog
-from pantohil.models.input_files import InputFileError
+from pantohil.models.errors import ExitCode, FmuFailure, PantohilError
 
-EXIT_BAD_INPUT = 2
+EXIT_BAD_INPUT = int(ExitCode.BAD_INPUT)
 
 
 MAX_FEM_SPANS = 200  # spans of a fem-sim section
@@ -559,8 +558,7 @@ def _cmd_emulator(args) -> int:
 
 
 def _cmd_identify(args) -> int:
-    from pantohil.models.rig.identification import IdentificationError
-    from pantohil.orchestrator.rig_identify import IdentifyRequest, LinkLost, identify
+    from pantohil.orchestrator.rig_identify import IdentifyRequest, identify
 
     case = load_case(args.case, args.overrides)
     rig = _rig_file_arg(args.rig)
@@ -569,14 +567,7 @@ def _cmd_identify(args) -> int:
         _check_key_file(case)
     request = IdentifyRequest(case, args.out, rig, hardware, args.amplitude_mm * 1e-3, args.spans, args.overwrite,
                               args.rt_priority)
-    try:
-        identify(request, announce=lambda line: print(line, flush=True))
-    except LinkLost as exc:
-        print(f"pantohil: error: {exc}", file=sys.stderr)
-        return 3
-    except IdentificationError as exc:
-        print(f"pantohil: error: {exc}", file=sys.stderr)
-        return 1
+    identify(request, announce=lambda line: print(line, flush=True))  # LinkLost: exit 3; IdentificationError: 1
     return 0
 
 
@@ -819,17 +810,19 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _guarded(handler, args) -> int:
-    """Bad input: one line and exit 2; an FMU failure or a failed write: one line and exit 1; a stop
+    """Every error pantohil raises on purpose: one line and its own exit code (models/errors.py: 2 bad
+    input or a missing tool, 1 a failure, 3 a lost link); a failed write: one line and exit 1; a stop
     signal: one line and exit 128 + the signal."""
     try:
         return handler(args)
-    except (CaseError, CatenaryError, ProfileError, InputFileError) as exc:
-        print(f"pantohil: error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    except PantohilError as exc:
+        prefix = "an FMU failed: " if isinstance(exc, FmuFailure) else ""
+        print(f"pantohil: error: {prefix}{exc.line()}", file=sys.stderr)
+        return int(exc.exit_code)
     except KeyboardInterrupt as exc:  # the output mechanisms have removed what they had not finished
         print(f"pantohil: {args.command} {_interrupted_by(exc)}", file=sys.stderr)
         return _interrupt_code(exc)
-    except Exception as exc:  # an FMU or master failure: one line, the run folder keeps what was written
+    except Exception as exc:  # a failed write, or an FMU failure fmpy reports: one line, what was written stays
         code = _failure_code(exc)
         if code is None:
             raise
@@ -850,24 +843,18 @@ def _interrupted_by(exc: BaseException) -> str:
 
 
 def _failure_code(exc: Exception) -> int | None:
-    """One line on stderr and the exit code of a known failure; None for an unexpected one (a bug)."""
+    """One line on stderr and the exit code of a known failure that is not a PantohilError (a full disk, an
+    FMU call fmpy reports as failed); None for an unexpected one (a bug)."""
     from pantohil.orchestrator.output_paths import write_failure
 
-    operator_file = sys.modules.get("pantohil.models.catenary.pfem.operator_file")  # not imported: not raised
-    if operator_file is not None and isinstance(exc, operator_file.OperatorFileError):
-        print(f"pantohil: error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     failure = write_failure(exc)
     if failure is not None:  # a full disk, a file size limit: what was written stays readable
         print(f"pantohil: error: {failure}", file=sys.stderr)
-        return 1
-    from fmpy.fmi1 import FMICallException
-
-    from pantohil.orchestrator.fmu_runtime import FmuError
-
-    if isinstance(exc, (FMICallException, FmuError)):
+        return int(ExitCode.FAILED)
+    fmi1 = sys.modules.get("fmpy.fmi1")  # not imported: not raised
+    if fmi1 is not None and isinstance(exc, fmi1.FMICallException):
         print(f"pantohil: error: an FMU failed: {exc}", file=sys.stderr)
-        return 1
+        return int(ExitCode.FAILED)
     return None
 
 

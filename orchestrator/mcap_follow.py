@@ -18,6 +18,7 @@ from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from pantohil.models.input_files import InputFileError, read_input_chunk
+from pantohil.models.errors import InputError
 
 MAGIC = b"\x89MCAP0\r\n"
 _HEADER = struct.Struct("<BQ")
@@ -29,7 +30,7 @@ MAX_POLL_BYTES = 2 * MAX_RECORD_BYTES  # read per poll: always room for one whol
 _UNIT = re.compile(r"\[([^\]]*)\]\s*$")
 
 
-class McapFollowError(ValueError):
+class McapFollowError(InputError):
     """The file being followed is not an MCAP file, or a record in it cannot be read."""
     pass
 

@@ -31,13 +31,14 @@ from pantohil.models.storage import write_text_atomic
 from pantohil.builder.system import HORIZON_OUTPUTS
 
 from .stopping import shielded
+from pantohil.models.errors import LinkError
 
 LINK_FAULT = 2
 MAX_UNCOVERED = 0.01  # rig-paced: uncovered ticks a record may hold (their figures are printed)
 LOCKSTEP_ANSWER_WAIT_S = 1.0  # model-paced: the longest wait for each answer (link.receive_timeout_s if longer)
 
 
-class LinkLost(Exception):
+class LinkLost(LinkError):
     """The rig did not accept the session, or the link faulted during the excitation."""
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.case import CaseError
+from pantohil.models.errors import ExitCode, PantohilError
 from pantohil.models.input_files import InputFileError, load_json, open_regular, read_input_text
 
 LOCK_NAME = ".pantohil-run.lock"
@@ -112,11 +113,12 @@ def claimed_run_folder(folder: Path, overwrite: bool = False, resume: bool = Fal
         raise
     try:
         yield folder
-    except CaseError:  # bad input found on the way: nothing half-written stays
-        if created:
-            shutil.rmtree(folder, ignore_errors=True)
-        elif not resume:
-            _clear(folder)
+    except PantohilError as exc:  # bad input or a missing tool found on the way: nothing half-written stays
+        if exc.exit_code == ExitCode.BAD_INPUT:
+            if created:
+                shutil.rmtree(folder, ignore_errors=True)
+            elif not resume:
+                _clear(folder)
         raise
     finally:
         _release(folder, fd)

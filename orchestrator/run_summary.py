@@ -10,9 +10,11 @@ import signal
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
-EXIT_CONVERGED = 0
-EXIT_NOT_CONVERGED = 1
-EXIT_LINK_LOST = 3
+from pantohil.models.errors import ExitCode
+
+EXIT_CONVERGED = int(ExitCode.SUCCESS)
+EXIT_NOT_CONVERGED = int(ExitCode.FAILED)
+EXIT_LINK_LOST = int(ExitCode.LINK_LOST)
 
 STATUSES = ("converged", "completed", "diverged", "span_limit", "contact_lost", "link_lost", "interrupted")
 

@@ -15,11 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.input_files import InputFileError, read_input_text
+from pantohil.models.errors import InputError
 
 GRAVITY_M_S2 = 9.81
 
 
-class ProfileError(ValueError):
+class ProfileError(InputError):
     """A profile that cannot be built or read."""
 
 

@@ -20,9 +20,10 @@ import numpy as np
 
 from ..pantograph.lumped import PantographParameters, make_pantograph
 from .drive_chain import MeasuredResponse, RigChain, RigSpec, harmonic_gains, multisine, record_spans
+from pantohil.models.errors import PantohilError
 
 
-class IdentificationError(ValueError):
+class IdentificationError(PantohilError, ValueError):
     """An identification whose record cannot give a response (a lost sample, a gain of zero)."""
 
 

@@ -13,9 +13,10 @@ from ..input_files import InputFileError, load_toml
 from ..parameters import MAX_SAMPLES_PER_SPAN
 from .actuator import ActuatorLimits
 from .drive_chain import ForcePath, HeightPath, MeasuredResponse, RigSpec
+from pantohil.models.errors import InputError
 
 
-class RigFileError(ValueError):
+class RigFileError(InputError):
     """A rig file that cannot be used; the message is one line naming the key."""
 
 

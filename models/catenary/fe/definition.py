@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.input_files import InputFileError, load_toml
+from pantohil.models.errors import InputError
 
 
-class CatenaryError(ValueError):
+class CatenaryError(InputError):
     """A catenary file that cannot be built; one line naming the key."""
 
 

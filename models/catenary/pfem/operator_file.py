@@ -16,6 +16,7 @@ import numpy as np
 from pantohil.models.catenary.pfem.operators import PfemOperators, PfemSettings
 from pantohil.models.input_files import InputFileError, open_regular
 from pantohil.models.storage import atomic_path, cache_folder
+from pantohil.models.errors import InputError
 
 FORMAT_VERSION = 1
 MAX_META_BYTES = 1 << 20  # the meta record: settings and build info, a few kB
@@ -24,7 +25,7 @@ _ARRAYS = {"cc": np.float32, "dc": np.complex64, "cd": np.float32, "dd": np.comp
            "dropper_x_m": np.float64}
 
 
-class OperatorFileError(ValueError):
+class OperatorFileError(InputError):
     """An operator file that cannot be used; the message is one line."""
 
 
