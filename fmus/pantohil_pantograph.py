@@ -3,6 +3,7 @@ or a rigid mass on the actuator (Paper A sec. 2, Paper B sec. 5.1)."""
 from __future__ import annotations
 
 from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
+from pantohil.models.pantograph.interface import PANTOGRAPHS
 from pantohil.models.pantograph.lumped import PantographParameters, make_pantograph
 
 VARIABLES = [
@@ -44,7 +45,8 @@ class PantohilPantograph(PantohilSlave):
     def exit_initialization_mode(self):
         """Build the pantograph from its parameters and settle it at the actuator's starting height."""
         self.check_parameters()
-        n = int(self.n_masses) if self.pantograph_model == 0 else 1
+        model = PANTOGRAPHS.name_of(self.pantograph_model, "pantograph_model")
+        n = 1 if PANTOGRAPHS.get(model).fixed_to_actuator else int(self.n_masses)
         def pick(stem):
             return tuple(float(getattr(self, f"{stem}_{i}")) for i in range(1, n + 1))
         params = PantographParameters(
@@ -53,7 +55,7 @@ class PantohilPantograph(PantohilSlave):
             dampings_Ns_m=pick("dampings_Ns_m"),
             contact_stiffness_N_m=self.contact_stiffness_N_m,
             uplift_force_N=self.uplift_force_N,
-            model="rigid_mass" if self.pantograph_model == 1 else "chain",
+            model=model,
             gravity_m_s2=self.gravity_m_s2,
         )
         self._model = make_pantograph(params, self.time_step, self.reference_height)

@@ -20,6 +20,7 @@ from pantohil.models.catenary.receptance import harmonic_count
 from pantohil.models.data import CASES_DIR, catalog
 from pantohil.models.hil.loop import HORIZON_AUTO_S, MAX_HORIZON_STEPS, HilSettings
 from pantohil.models.input_files import InputFileError, TomlSyntaxError, load_toml, loads_toml
+from pantohil.models.pantograph.interface import PANTOGRAPHS
 from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.parameters import (
     AUTO,
@@ -315,9 +316,10 @@ def mean_force_en50367(speed_kmh: float) -> float:
 def _check_pantograph(v: dict) -> PantographParameters:
     p = v["pantograph"]
     names = ("masses_kg", "stiffnesses_N_m", "dampings_Ns_m")
-    if p["model"] == "rigid_mass":
+    if PANTOGRAPHS.get(p["model"], "pantograph.model").fixed_to_actuator:
         if len(p["masses_kg"]) != 1:
-            raise CaseError("pantograph.masses_kg: a rigid mass takes exactly one mass")
+            raise CaseError(f"pantograph.masses_kg: a mass fixed to the actuator ({p['model']}) takes exactly one "
+                            "mass")
     else:
         n = len(p["masses_kg"])
         if not 1 <= n <= 3:

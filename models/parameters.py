@@ -22,6 +22,8 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+from pantohil.models.pantograph.interface import PANTOGRAPHS
+
 AUTO = "auto"
 REQUIRED = object()  # a field without a default: the case must give it
 
@@ -131,7 +133,9 @@ class ProfileSection:
 class PantographSection:
     """[pantograph]: the lumped pantograph (Paper A sec. 2, Table A.3)."""
 
-    model: str = param("chain", "1", "pantograph model", choices=("chain", "rigid_mass"), fmu="pantograph")
+    model: str = param("chain", "1", "pantograph model (models/pantograph/interface.py; other packages add "
+                                         "theirs under the entry-point group pantohil.pantographs)",
+                       choices=PANTOGRAPHS.names(), fmu="pantograph")
     masses_kg: tuple = param((6.6, 5.8, 5.8), "kg", "masses, head first", 0.0, 1000.0, low_open=True,
                              fmu="pantograph", fmu_items=3)
     stiffnesses_N_m: tuple = param((7000.0, 14100.0, 80.0), "N/m", "element stiffnesses (mass i to mass i+1 or "

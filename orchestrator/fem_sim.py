@@ -43,8 +43,11 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
         raise CaseError("catenary.definition_file: the case's catenary has no catenary file to build a section from")
     path = (case.source.parent / case.values["catenary"]["definition_file"]).resolve()
     cat = load_definition(path)
-    if case.pantograph.model != "chain":
-        raise CaseError("pantograph.model: fem-sim needs a pantograph in contact (\"chain\"), not a rigid mass")
+    from pantohil.models.catenary.fe.simulation import FE_PANTOGRAPHS
+
+    if case.pantograph.model not in FE_PANTOGRAPHS:
+        raise CaseError(f"pantograph.model: fem-sim steps the pantograph models {', '.join(FE_PANTOGRAPHS)} "
+                        f"(a pantograph in contact), not {case.pantograph.model!r}")
     with atomic_output_folder(out_dir, "--out", overwrite) as part:
         res = _simulate(case, cat, n_spans, progress)
         summary = _write_section(part, case, cat, path, n_spans, spans, res)

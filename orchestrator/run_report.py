@@ -8,6 +8,7 @@ from dataclasses import asdict
 import numpy as np
 from pantohil.models.case import Case
 from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
+from pantohil.models.pantograph.interface import pantograph_model
 
 from . import report
 from .case_reference import case_dropper_positions, closed_form_reference
@@ -101,7 +102,7 @@ def _last_span(state, spans_done: int, plots) -> dict:
                              master.column("catenary", "profile_at_sample", start, stop),
                              master.column("catenary", "height_at_sample", start, stop), f, case.speed_m_s)
     filtered = lowpass_periodic(f, dt, FILTER_HZ)
-    out = {"contact_force": _statistics(f, filtered, case.pantograph.model != "rigid_mass")}
+    out = {"contact_force": _statistics(f, filtered, not pantograph_model(case.pantograph).fixed_to_actuator)}
     ref = None
     if case.model == "asm":
         ref, out["reference"] = _reference(case, f)

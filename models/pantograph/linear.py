@@ -41,18 +41,28 @@ class LinearPantograph:
 
 
 def linear_pantograph(params: PantographParameters, dt: float) -> LinearPantograph:
-    """The homogeneous one-step map of the case's pantograph, in contact."""
-    if params.model == "rigid_mass":
-        b, g = HhtConstants().beta, HhtConstants().gamma
-        # x = [z, v, a]; a' = (z_new - z - dt v - dt^2 (1/2 - b) a) / (b dt^2)
-        a_row = np.array([-1.0, -dt, -dt * dt * (0.5 - b)]) / (b * dt * dt)
-        a_z = 1.0 / (b * dt * dt)
-        Pp = np.vstack([np.zeros(3), np.array([0.0, 1.0, dt * (1 - g)]) + dt * g * a_row, a_row])
-        pz = np.array([1.0, dt * g * a_z, a_z])
-        m = params.masses_kg[0]
-        return LinearPantograph(Pp, pz, np.zeros(3), np.array([0.0, 0.0, -m]), 0.0)
+    """The homogeneous one-step map of the case's pantograph in contact, from the model its `model` names."""
+    from .interface import pantograph_model
+
+    return pantograph_model(params).linear(params, dt)
+
+
+def rigid_mass_linear(params: PantographParameters, dt: float) -> LinearPantograph:
+    """The rigid mass's Newmark differentiator as a map of x = [z, v, a]: f = -m a (Paper B sec. 5.1)."""
+    b, g = HhtConstants().beta, HhtConstants().gamma
+    # a' = (z_new - z - dt v - dt^2 (1/2 - b) a) / (b dt^2)
+    a_row = np.array([-1.0, -dt, -dt * dt * (0.5 - b)]) / (b * dt * dt)
+    a_z = 1.0 / (b * dt * dt)
+    Pp = np.vstack([np.zeros(3), np.array([0.0, 1.0, dt * (1 - g)]) + dt * g * a_row, a_row])
+    pz = np.array([1.0, dt * g * a_z, a_z])
+    m = params.masses_kg[0]
+    return LinearPantograph(Pp, pz, np.zeros(3), np.array([0.0, 0.0, -m]), 0.0)
+
+
+def chain_linear(params: PantographParameters, dt: float) -> LinearPantograph:
+    """The chain's HHT step with the penalty contact active, f = k_c (y1 - z)."""
     pan = ChainPantograph(params, dt)
-    P, n = pan._step_act, params.n
+    P, n = pan.contact_step_matrix, params.n
     c = np.zeros(3 * n)
     c[0] = params.contact_stiffness_N_m
     return LinearPantograph(P[:, :3 * n], P[:, 3 * n], P[:, 3 * n + 1], c, -params.contact_stiffness_N_m)

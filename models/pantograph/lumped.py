@@ -25,7 +25,7 @@ class PantographParameters:
     dampings_Ns_m: tuple = (0.0, 0.0, 70.0)
     contact_stiffness_N_m: float = 50000.0
     uplift_force_N: float = 130.0
-    model: str = "chain"  # "chain" or "rigid_mass"
+    model: str = "chain"  # a name in models/pantograph/interface.PANTOGRAPHS
     gravity_m_s2: float = 0.0  # only the rigid mass feels it (its load cell is not tared)
 
     @property
@@ -53,19 +53,11 @@ class PantographParameters:
         return M, C, K
 
     def receptance(self, omega):
-        """Contact-point receptance H_p = 1/k_h + [K - w^2 M + i w C]^-1_(1,1), Paper A eq. (18).
+        """Contact-point receptance H_p of the model `self.model` names (Paper A eq. (18); a rigid mass:
+        -1/(m w^2), for w > 0 only); models/pantograph/interface.py."""
+        from .interface import pantograph_model  # the registry's models are built from these parameters
 
-        For the rigid mass: H_p = -1/(m w^2) (no contact spring), defined for w > 0 only.
-        """
-        omega = np.atleast_1d(np.asarray(omega, dtype=float))
-        if self.model == "rigid_mass":
-            with np.errstate(divide="ignore"):
-                return -1.0 / (self.masses_kg[0] * omega**2) + 0j
-        M, C, K = self.matrices()
-        out = np.empty(omega.shape, dtype=complex)
-        for j, w in enumerate(omega):
-            out[j] = np.linalg.inv(K - w**2 * M + 1j * w * C)[0, 0]
-        return out + 1.0 / self.contact_stiffness_N_m
+        return pantograph_model(self).receptance(self, omega)
 
     def contact_frequency_hz(self) -> float:
         """Natural frequency of the head on its contact spring, sqrt((k1 + k_c)/m1)/(2 pi) (Paper D sec. 4)."""
@@ -73,7 +65,9 @@ class PantographParameters:
 
     def static_compliance_m_N(self) -> float:
         """Head displacement per unit head force at rest, with the contact spring in series."""
-        if self.model == "rigid_mass":
+        from .interface import pantograph_model
+
+        if pantograph_model(self).fixed_to_actuator:
             return 0.0
         return float(self.receptance(0.0)[0].real)
 
@@ -151,6 +145,11 @@ class ChainPantograph:
         """Height of the head (mass 1) [m]."""
         return float(self.head_ref + self._x[0])
 
+    @property
+    def contact_step_matrix(self) -> np.ndarray:
+        """The affine HHT step in contact, [u, v, a]_new = P [u, v, a, z_next, f_old, 1] (for the linear map)."""
+        return self._step_act
+
     def _affine_step(self, contact: bool) -> np.ndarray:
         """Matrix P with [u, v, a]_new = P [u, v, a, z_next, f_old, 1] for one HHT step (Hilber-Hughes-Taylor
         1977; constants of Paper A App. A), with the penalty contact active or not."""
@@ -174,6 +173,14 @@ class ChainPantograph:
         A_u = ext(u_pred) + b * dt * dt * A_acc
         A_v = ext(v_pred) + g * dt * A_acc
         return np.vstack([A_u, A_v, A_acc])
+
+    def contact_force_at(self, z_next: float) -> float:
+        """The contact force the next HHT step would give in contact for a wire height z_next, without
+        advancing the pantograph: the step is affine in z_next."""
+        x = self._x
+        x[-3], x[-2] = z_next, self.force
+        new = self._step_act @ x
+        return self.kc * (self.head_ref + new[0] - z_next)
 
     def step(self, z_next: float) -> float:
         """One HHT step with unilateral contact: free unless the head would penetrate the wire."""
@@ -232,8 +239,18 @@ class RigidMass:
         return self.force
 
 
+def chain_receptance(params: PantographParameters, omega) -> np.ndarray:
+    """Contact-point receptance of the chain, H_p = 1/k_h + [K - w^2 M + i w C]^-1_(1,1), Paper A eq. (18)."""
+    omega = np.atleast_1d(np.asarray(omega, dtype=float))
+    M, C, K = params.matrices()
+    out = np.empty(omega.shape, dtype=complex)
+    for j, w in enumerate(omega):
+        out[j] = np.linalg.inv(K - w**2 * M + 1j * w * C)[0, 0]
+    return out + 1.0 / params.contact_stiffness_N_m
+
+
 def make_pantograph(params: PantographParameters, dt: float, reference_height_m: float = 0.0):
-    """The time-domain model for a parameter set."""
-    if params.model == "rigid_mass":
-        return RigidMass(params, dt)
-    return ChainPantograph(params, dt, reference_height_m)
+    """The time-domain model of a parameter set, from the model its `model` names."""
+    from .interface import pantograph_model
+
+    return pantograph_model(params).build(params, dt, reference_height_m)

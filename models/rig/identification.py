@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..pantograph.interface import pantograph_model
 from ..pantograph.lumped import PantographParameters, make_pantograph
 from .drive_chain import MeasuredResponse, RigChain, RigSpec, harmonic_gains, multisine, record_spans
 from pantohil.models.errors import PantohilError
@@ -140,4 +141,5 @@ def response_errors(measured: MeasuredResponse, height: np.ndarray, force: np.nd
 
 def is_mass(params: PantographParameters) -> bool:
     """Whether a case's pantograph is a rigid mass on the actuator (what an identification mounts)."""
-    return params.model == "rigid_mass" and math.isfinite(params.masses_kg[0]) and params.masses_kg[0] > 0
+    return (pantograph_model(params).fixed_to_actuator and math.isfinite(params.masses_kg[0])
+            and params.masses_kg[0] > 0)

@@ -26,6 +26,8 @@ from pantohil.models.catenary.fe.model import form_find
 from pantohil.models.pantograph.lumped import ChainPantograph, HhtConstants, PantographParameters
 from pantohil.models.catenary.pfem.blocks import hermite_shapes
 
+FE_PANTOGRAPHS = ("chain",)  # the models the section simulation steps: it needs the chain's contact step
+
 
 @dataclass
 class FeSimResult:
@@ -380,9 +382,4 @@ def asm_string_section(asm, span_m: float, n_spans: int, elements_per_span: int,
 def _pantograph_force(p: ChainPantograph, z_next: float) -> float:
     """The contact force the pantograph's next HHT step would give for a wire height z_next, in contact
     (without advancing it): its step is affine in z_next."""
-    x = p._x
-    n = p.params.n
-    x[:n], x[n:2 * n], x[2 * n:3 * n] = p.u, p.v, p.acc
-    x[-3], x[-2] = z_next, p.force
-    new = p._step_act @ x
-    return p.kc * (p.head_ref + new[0] - z_next)
+    return p.contact_force_at(z_next)
