@@ -3,8 +3,8 @@ or a rigid mass on the actuator (Paper A sec. 2, Paper B sec. 5.1)."""
 from __future__ import annotations
 
 from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
-from pantohil.models.pantograph.interface import PANTOGRAPHS
-from pantohil.models.pantograph.lumped import PantographParameters, make_pantograph
+from pantohil.models.pantograph.interface import PANTOGRAPHS, make_pantograph
+from pantohil.models.pantograph.lumped import PantographParameters
 
 VARIABLES = [
     *case_variables("pantograph"),

@@ -30,7 +30,7 @@ from pathlib import Path
 from pantohil.fmus import udp_protocol as proto
 from pantohil.fmus.link_client import TICK_COUNTS
 from pantohil.models.case import Case
-from pantohil.models.pantograph.lumped import make_pantograph
+from pantohil.models.pantograph.interface import make_pantograph
 from pantohil.models.hil.rig_loop import case_rig
 from pantohil.models.rig.drive_chain import RigSpec
 from pantohil.models.rig.drive_chain import latency_steps as chain_latency_steps

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..case import Case
 from ..catenary.receptance import CirculantOperator, asm_operator, reduce_harmonics
-from ..pantograph.lumped import make_pantograph
+from ..pantograph.interface import make_pantograph
 from ..rig.chain import Rig
 from ..rig.compensation import HarmonicCompensation
 from ..rig.drive_chain import RigChain, RigSpec

@@ -96,3 +96,26 @@ PANTOGRAPHS: Registry[PantographModel] = Registry("pantograph", "pantohil.pantog
 def pantograph_model(params: PantographParameters) -> PantographModel:
     """The registered model that `params.model` names."""
     return PANTOGRAPHS.get(params.model, "pantograph.model")
+
+
+def make_pantograph(params: PantographParameters, dt: float, reference_height_m: float = 0.0) -> SteppedPantograph:
+    """The time-domain model of a parameter set, from the model its `model` names."""
+    return pantograph_model(params).build(params, dt, reference_height_m)
+
+
+def linear_pantograph(params: PantographParameters, dt: float) -> LinearPantograph:
+    """The homogeneous one-step map of the case's pantograph in contact (Paper D eq. A.3)."""
+    return pantograph_model(params).linear(params, dt)
+
+
+def receptance(params: PantographParameters, omega_rad_s) -> np.ndarray:
+    """Contact-point receptance H_p(omega) of the case's pantograph [m/N] (Paper A eq. 18)."""
+    return pantograph_model(params).receptance(params, omega_rad_s)
+
+
+def static_compliance_m_N(params: PantographParameters) -> float:
+    """Head displacement per unit head force at rest, contact spring in series; 0 for a mass fixed to the
+    actuator."""
+    if pantograph_model(params).fixed_to_actuator:
+        return 0.0
+    return float(receptance(params, 0.0)[0].real)

@@ -40,13 +40,6 @@ class LinearPantograph:
         return (c_r_pz + self.cz / lam) / (1.0 - c_r_pf)
 
 
-def linear_pantograph(params: PantographParameters, dt: float) -> LinearPantograph:
-    """The homogeneous one-step map of the case's pantograph in contact, from the model its `model` names."""
-    from .interface import pantograph_model
-
-    return pantograph_model(params).linear(params, dt)
-
-
 def rigid_mass_linear(params: PantographParameters, dt: float) -> LinearPantograph:
     """The rigid mass's Newmark differentiator as a map of x = [z, v, a]: f = -m a (Paper B sec. 5.1)."""
     b, g = HhtConstants().beta, HhtConstants().gamma

@@ -52,24 +52,9 @@ class PantographParameters:
                 C[i + 1, i] -= c
         return M, C, K
 
-    def receptance(self, omega):
-        """Contact-point receptance H_p of the model `self.model` names (Paper A eq. (18); a rigid mass:
-        -1/(m w^2), for w > 0 only); models/pantograph/interface.py."""
-        from .interface import pantograph_model  # the registry's models are built from these parameters
-
-        return pantograph_model(self).receptance(self, omega)
-
     def contact_frequency_hz(self) -> float:
         """Natural frequency of the head on its contact spring, sqrt((k1 + k_c)/m1)/(2 pi) (Paper D sec. 4)."""
         return float(np.sqrt((self.stiffnesses_N_m[0] + self.contact_stiffness_N_m) / self.masses_kg[0]) / (2 * np.pi))
-
-    def static_compliance_m_N(self) -> float:
-        """Head displacement per unit head force at rest, with the contact spring in series."""
-        from .interface import pantograph_model
-
-        if pantograph_model(self).fixed_to_actuator:
-            return 0.0
-        return float(self.receptance(0.0)[0].real)
 
 
 @dataclass(frozen=True)
@@ -247,10 +232,3 @@ def chain_receptance(params: PantographParameters, omega) -> np.ndarray:
     for j, w in enumerate(omega):
         out[j] = np.linalg.inv(K - w**2 * M + 1j * w * C)[0, 0]
     return out + 1.0 / params.contact_stiffness_N_m
-
-
-def make_pantograph(params: PantographParameters, dt: float, reference_height_m: float = 0.0):
-    """The time-domain model of a parameter set, from the model its `model` names."""
-    from .interface import pantograph_model
-
-    return pantograph_model(params).build(params, dt, reference_height_m)

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..pantograph.interface import pantograph_model
-from ..pantograph.lumped import PantographParameters, make_pantograph
+from ..pantograph.interface import make_pantograph, pantograph_model
+from ..pantograph.lumped import PantographParameters
 from .drive_chain import MeasuredResponse, RigChain, RigSpec, harmonic_gains, multisine, record_spans
 from pantohil.models.errors import PantohilError
 

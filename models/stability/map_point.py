@@ -16,7 +16,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from pantohil.models.hil.loop import HilSettings
-from pantohil.models.pantograph.linear import LinearPantograph, linear_pantograph
+from pantohil.models.pantograph.interface import linear_pantograph
+from pantohil.models.pantograph.linear import LinearPantograph
 from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.stability.maps import (circulant_dense, circulant_range_basis, range_basis,
     reduced_span_parts, span_map, step_matrix)

@@ -18,7 +18,7 @@ from pathlib import Path
 def per_radius_costs() -> None:
     from pantohil.models.case import load_case
     from pantohil.models.hil.loop import HilSettings
-    from pantohil.models.pantograph.linear import linear_pantograph
+    from pantohil.models.pantograph.interface import linear_pantograph
     from pantohil.models.catenary.receptance import asm_operator
     from pantohil.models.stability.maps import (circulant_dense, circulant_range_basis, reduced_span_map,
         reduced_span_parts, span_map, step_matrix)

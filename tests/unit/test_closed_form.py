@@ -6,6 +6,7 @@ import pytest
 
 from pantohil.models.catenary.asm.string import receptance_behind, receptance_direct
 from pantohil.models.case import load_case
+from pantohil.models.pantograph.interface import receptance
 from pantohil.models.catenary.asm.closed_form import (
     one_sided_harmonics,
     optimal_spacings,
@@ -56,7 +57,7 @@ def test_optimal_spacings_are_minima_of_the_trailing_force(case):
     # the L_min of eq. (45) up to the neglected k3 wave and k2 damping.
     cat, pan, v = case.catenary, case.pantograph, 300 / 3.6
     w = 2 * math.pi * 10.0
-    hp, h11 = pan.receptance(w)[0], receptance_direct(cat, w, v)
+    hp, h11 = receptance(pan, w)[0], receptance_direct(cat, w, v)
     L = np.linspace(5, 150, 6000)
     h21 = np.array([receptance_behind(cat, w, v, x) for x in L])
     f2 = np.abs(1 - h21 * np.exp(1j * w * L / v) / (hp + h11))

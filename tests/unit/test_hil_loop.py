@@ -10,7 +10,7 @@ import pytest
 
 from pantohil.models.case import load_case
 from pantohil.models.hil.loop import ConvergenceMonitor, HilSettings, PeriodicHil
-from pantohil.models.pantograph.lumped import make_pantograph
+from pantohil.models.pantograph.interface import make_pantograph
 from pantohil.models.catenary.receptance import CirculantOperator, asm_operator, reduce_harmonics
 from pantohil.orchestrator.hil_run import closed_form_reference
 

@@ -11,7 +11,7 @@ from pantohil.models.case import load_case
 from pantohil.models.catenary.receptance import asm_operator
 from pantohil.models.hil.loop import HilSettings
 from pantohil.models.hil.rig_loop import run_loop
-from pantohil.models.pantograph.linear import linear_pantograph
+from pantohil.models.pantograph.interface import linear_pantograph
 from pantohil.models.rig.drive_chain import HeightPath, RigChain, RigSpec
 from pantohil.models.rig.rig_file import load_rig_file
 from pantohil.models.stability.map_point import rig_problem_for

@@ -5,7 +5,7 @@ import pytest
 
 from pantohil.models.case import load_case
 from pantohil.models.hil.loop import HilSettings
-from pantohil.models.pantograph.linear import linear_pantograph
+from pantohil.models.pantograph.interface import linear_pantograph
 from pantohil.models.pantograph.lumped import PantographParameters, RigidMass
 from pantohil.models.catenary.receptance import asm_operator, harmonic_count
 from pantohil.models.stability.maps import (

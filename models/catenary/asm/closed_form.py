@@ -12,6 +12,7 @@ import numpy as np
 
 from pantohil.models.catenary.asm.string import (AsmParameters, characteristic_coefficients, poles, receptance_ahead,
     receptance_behind, receptance_direct)
+from pantohil.models.pantograph.interface import receptance
 from pantohil.models.pantograph.lumped import PantographParameters
 
 
@@ -57,7 +58,7 @@ class SteadyState:
 
 def dynamic_stiffness(cat: AsmParameters, pan: PantographParameters, omega, speed: float):
     """K_D = -1 / (H_p + H11), Paper A eq. (40)."""
-    return -1.0 / (pan.receptance(omega) + receptance_direct(cat, omega, speed))
+    return -1.0 / (receptance(pan, omega) + receptance_direct(cat, omega, speed))
 
 
 def single_pantograph(cat: AsmParameters, pan: PantographParameters, speed: float, span_m: float,
@@ -83,7 +84,7 @@ def two_pantographs(cat: AsmParameters, pan: PantographParameters, speed: float,
     f1[0] = f2[0] = mean_force_N
     for j in range(1, n_harmonics):
         w = omega[j]
-        hp = pan.receptance(w)[0]
+        hp = receptance(pan, w)[0]
         h11 = receptance_direct(cat, w, speed)
         h12 = receptance_ahead(cat, w, speed, spacing_m)
         h21 = receptance_behind(cat, w, speed, spacing_m)
@@ -104,7 +105,7 @@ def optimal_spacings(cat: AsmParameters, pan: PantographParameters, speed: float
     k3 = pl.upper[1] if len(pl.upper) > 1 else None
     lam = characteristic_coefficients(cat, omega, speed)[0]
     prod = (k2 - k1) * (k2 - k3) if k3 is not None else (k2 - k1)
-    hp = pan.receptance(omega)[0]
+    hp = receptance(pan, omega)[0]
     c_a = 1j / ((hp + receptance_direct(cat, omega, speed)) * lam * prod)
     denom = omega / speed + k2.real
     period = 2 * math.pi / abs(denom)
