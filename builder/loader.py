@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import fmpy
+
 from pantohil.models.errors import SetupError
 
 SOURCE = Path(__file__).parent / "loader" / "fmu_loader.c"

@@ -14,12 +14,12 @@ from fmpy import read_model_description
 
 from pantohil.fmus.fmu_support import UNITS
 from pantohil.models.case import CaseError, apply_overrides, build_case, load_case_dict
+from pantohil.models.errors import InputError
 from pantohil.models.input_files import InputFileError, open_regular
 from pantohil.models.parameters import fmu_keys, fmu_variable_names
 from pantohil.models.storage import atomic_path
 
 from .system import CONNECTIONS
-from pantohil.models.errors import InputError
 
 SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"

@@ -18,8 +18,8 @@ from pathlib import Path
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
 
 from pantohil.fmus import state_codec
-from pantohil.models.parameters import AUTO, Key, fmu_keys, fmu_variable_names
 from pantohil.models.errors import InputError
+from pantohil.models.parameters import AUTO, Key, fmu_keys, fmu_variable_names
 
 PARAMETERS_FILE = "parameters.json"
 REQUIREMENTS_FILE = "requirements.txt"  # what `pythonfmu deploy` installs on a host

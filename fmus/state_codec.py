@@ -20,6 +20,7 @@ import sys
 from collections import OrderedDict, deque
 
 import numpy as np
+
 from pantohil.models.errors import InputError
 
 FORMAT = b"pantohil-fmu-state 2\n"

@@ -23,9 +23,9 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+from pantohil.models.errors import InputError
 from pantohil.models.hil.loop import MAX_HORIZON_STEPS
 from pantohil.models.input_files import InputFileError, read_input_bytes
-from pantohil.models.errors import InputError
 
 MAGIC = 0x31484850  # b"PHH1" little-endian (kept from version 1, so an old peer is recognised)
 VERSION = 3

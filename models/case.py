@@ -18,6 +18,7 @@ from pantohil.models.catenary.asm.string import AsmParameters, receptance_direct
 from pantohil.models.catenary.profile import DropperProfile, ProfileError, TabulatedProfile, read_profile_csv
 from pantohil.models.catenary.receptance import harmonic_count
 from pantohil.models.data import CASES_DIR, catalog
+from pantohil.models.errors import InputError
 from pantohil.models.hil.loop import HORIZON_AUTO_S, MAX_HORIZON_STEPS, HilSettings
 from pantohil.models.input_files import InputFileError, TomlSyntaxError, load_toml, loads_toml
 from pantohil.models.pantograph.interface import PANTOGRAPHS
@@ -38,7 +39,6 @@ from pantohil.models.rig.drive_chain import RigSpec, frequency_response
 from pantohil.models.rig.drive_chain import latency_steps as chain_latency_steps
 from pantohil.models.rig.drive_chain import pattern_spans as chain_pattern_spans
 from pantohil.models.rig.rig_file import RigFileError, load_rig_file
-from pantohil.models.errors import InputError
 
 _RIG_CHAIN_KEYS = ("delay_steps", "comm_decimation", "servo_bandwidth_hz", "servo_damping", "loadcell_cutoff_hz")
 DEFAULT_CASE = CASES_DIR / "asm_250.toml"

@@ -16,6 +16,7 @@ import re
 import stat
 import tomllib
 from pathlib import Path
+
 from pantohil.models.errors import InputError
 
 MAX_INPUT_BYTES = 4 * 1024 * 1024

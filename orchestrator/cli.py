@@ -441,7 +441,7 @@ def _cmd_run(args, stop) -> int:
             case, resume = _resume_case(args)
             args.out = args.resume
         elif args.case is not None and args.case.suffix == ".ssp":
-            from pantohil.builder.ssp import SspError, read_ssp, ssp_case, temporary_dir
+            from pantohil.builder.ssp import read_ssp, ssp_case, temporary_dir
 
             if any(not o.startswith("run.") for o in args.overrides):
                 raise CaseError("--set: an SSP file fixes its system; only run.* keys can be overridden")
@@ -449,11 +449,8 @@ def _cmd_run(args, stop) -> int:
                 raise CaseError(f"SSP file {args.case} does not exist or is not a file")
             unpacked = temporary_dir("pantohil_ssp_")
             cleanup.callback(shutil.rmtree, unpacked, True)
-            try:  # the case as the SSP's parameter values make it, validated as any case
-                system = read_ssp(args.case, unpacked)
-                case = ssp_case(args.case, system, args.overrides)
-            except SspError as exc:
-                raise CaseError(str(exc)) from None
+            system = read_ssp(args.case, unpacked)  # SspError: bad input, exit 2
+            case = ssp_case(args.case, system, args.overrides)  # the case as the SSP's values make it, validated
         else:
             case = load_case(args.case, args.overrides)
         checkpoint_info = None  # an SSP run saves no checkpoint: its system lives in a temporary folder
@@ -621,13 +618,9 @@ def _write_ssp(case, fmus: dict, args) -> None:
 
 
 def _cmd_catenary(args) -> int:
-    from pantohil.models.catenary.fe.definition import CatenaryError
     from pantohil.orchestrator.catenary_report import catenary_report
 
-    try:
-        s = catenary_report(catalog.resolve(args.file, "catenary"), args.out, args.overwrite)
-    except CatenaryError as exc:
-        raise CaseError(str(exc)) from None
+    s = catenary_report(catalog.resolve(args.file, "catenary"), args.out, args.overwrite)  # CatenaryError: exit 2
     fit = s["asm_fit"]
     print(f"{s['name']}: {len(s['dropper_lengths_m'])} droppers, lengths {min(s['dropper_lengths_m']):.3f}-"
           f"{max(s['dropper_lengths_m']):.3f} m, tensions >= {s['min_dropper_tension_N']:.1f} N, height error "

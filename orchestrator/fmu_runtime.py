@@ -6,8 +6,8 @@ from pathlib import Path
 
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave, fmi2Boolean, fmi2Integer, fmi2Real, fmi2ValueReference
-from pantohil.models.scratch import scratch_dir
 from pantohil.models.errors import FmuFailure
+from pantohil.models.scratch import scratch_dir
 
 STATUS_NAMES = {0: "OK", 1: "warning", 2: "discard", 3: "error", 4: "fatal", 5: "pending"}
 

@@ -17,8 +17,8 @@ from mcap.exceptions import EndOfFile
 from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from pantohil.models.input_files import InputFileError, read_input_chunk
 from pantohil.models.errors import InputError
+from pantohil.models.input_files import InputFileError, read_input_chunk
 
 MAGIC = b"\x89MCAP0\r\n"
 _HEADER = struct.Struct("<BQ")

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.case import Case, CaseError
+from pantohil.models.errors import LinkError
 from pantohil.models.rig.drive_chain import MeasuredResponse, RigSpec, frequency_response, record_spans
 from pantohil.models.rig.identification import (Excitation, IdentificationError, excitation, identify_chain,
                                                 is_mass, mass_force, estimate, response_errors)
@@ -31,7 +32,6 @@ from pantohil.models.storage import write_text_atomic
 from pantohil.builder.system import HORIZON_OUTPUTS
 
 from .stopping import shielded
-from pantohil.models.errors import LinkError
 
 LINK_FAULT = 2
 MAX_UNCOVERED = 0.01  # rig-paced: uncovered ticks a record may hold (their figures are printed)

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pantohil.models.input_files import InputFileError, read_input_text
 from pantohil.models.errors import InputError
+from pantohil.models.input_files import InputFileError, read_input_text
 
 GRAVITY_M_S2 = 9.81
 

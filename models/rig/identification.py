@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import PantohilError
 from ..pantograph.interface import make_pantograph, pantograph_model
 from ..pantograph.lumped import PantographParameters
 from .drive_chain import MeasuredResponse, RigChain, RigSpec, harmonic_gains, multisine, record_spans
-from pantohil.models.errors import PantohilError
 
 
 class IdentificationError(PantohilError, ValueError):

@@ -9,11 +9,11 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+from ..errors import InputError
 from ..input_files import InputFileError, load_toml
 from ..parameters import MAX_SAMPLES_PER_SPAN
 from .actuator import ActuatorLimits
 from .drive_chain import ForcePath, HeightPath, MeasuredResponse, RigSpec
-from pantohil.models.errors import InputError
 
 
 class RigFileError(InputError):

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pantohil.models.input_files import InputFileError, load_toml
 from pantohil.models.errors import InputError
+from pantohil.models.input_files import InputFileError, load_toml
 
 
 class CatenaryError(InputError):

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.catenary.pfem.operators import PfemOperators, PfemSettings
+from pantohil.models.errors import InputError
 from pantohil.models.input_files import InputFileError, open_regular
 from pantohil.models.storage import atomic_path, cache_folder
-from pantohil.models.errors import InputError
 
 FORMAT_VERSION = 1
 MAX_META_BYTES = 1 << 20  # the meta record: settings and build info, a few kB
