@@ -55,6 +55,8 @@ COUNTERS = {
 RIG_PACED_COUNTERS = {
     "samples": "Rig-paced: rig samples received in time for their step",
     "answered": "Rig-paced: samples answered",
+    "held_out": "Rig-paced: forces not taken as measured: at a tick no answer covered, or within "
+                "link.settle_after_hold_s after one",
 }
 # The rig's tick counts (docs/udp-protocol.md, "Which height a tick takes"), from its latest FORCE or SAMPLE
 TICK_COUNTS = {
@@ -76,6 +78,7 @@ class LinkConfig:
     pipeline_steps: int = 1
     receive_timeout_s: float = 0.0003
     sample_timeout_s: float = 0.5
+    settle_after_hold_s: float = 0.01
     tolerated_losses: int = 50
     horizon_steps: int = 1
     local_host: str = ""
@@ -99,6 +102,7 @@ class LinkCounters:
     nonfinite: int = 0
     samples: int = 0
     answered: int = 0
+    held_out: int = 0
     fresh: int = 0
     predicted: int = 0
     uncovered: int = 0
@@ -132,6 +136,9 @@ class LinkClient:
         self._consecutive = 0
         self._missed = 0
         self._seq = 0
+        self._uncovered_seen = 0  # rig-paced: the rig's uncovered count in the newest sample taken
+        self._settle_left = 0  # rig-paced: samples still to hold out after the actuator held
+        self._settle_steps = math.ceil(config.settle_after_hold_s / config.dt_s - 1e-9)
         self._early = {}  # answers that came before their step awaited them (reordering)
         self._arrival_ns = OrderedDict()  # rig-paced: kernel arrival time of each sample not yet answered
         self._limiter = Limiter(config.limits, config.dt_s, 0.0)
@@ -332,11 +339,27 @@ class LinkClient:
             self.actuator_height = msg.b
             c.received += 1
             c.fresh, c.predicted, c.uncovered = msg.fresh, msg.predicted, msg.uncovered
+            if self.rig_paced and self._held_out(msg.uncovered):
+                self.measured_force = math.nan
+                c.held_out += 1
             self._remember(awaited)
             self._consecutive = 0
             if self.state != LINK_FAULT:
                 self.state = LINK_OK
         c.lost = self._missed - c.late
+
+    def _held_out(self, uncovered: int) -> bool:
+        """Whether this sample's force is not taken as measured: the rig's uncovered count grew since the
+        previous sample (the actuator held at this tick, or at a tick whose sample was lost), or it did within
+        link.settle_after_hold_s before (the actuator's return to the wanted height disturbs the force)."""
+        if uncovered > self._uncovered_seen:
+            self._uncovered_seen = uncovered
+            self._settle_left = self._settle_steps
+            return True
+        if self._settle_left > 0:
+            self._settle_left -= 1
+            return True
+        return False
 
     def _rig_paced_step(self, height_m: float, ahead_m) -> None:
         """Consume the rig's sample for this step (waiting for it), answer it with the heights at once.

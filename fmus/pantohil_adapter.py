@@ -115,6 +115,7 @@ class PantohilAdapter(PantohilSlave):
         return LinkConfig(rig_host=self.rig_host, rig_port=int(self.rig_port), dt_s=self.time_step, limits=limits,
                           paced_by=int(self.link_paced_by), pipeline_steps=int(self.pipeline_steps),
                           receive_timeout_s=self.receive_timeout_s, sample_timeout_s=self.sample_timeout_s,
+                          settle_after_hold_s=self.settle_after_hold_s,
                           tolerated_losses=int(self.tolerated_losses), horizon_steps=int(self.horizon_steps),
                           local_host=self.local_host, local_port=int(self.local_port), key_file=self.key_file)
 

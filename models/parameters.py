@@ -185,6 +185,10 @@ class LinkSection:
                                         "per rig tick, answered at once)", choices=("model", "rig"), fmu="adapter")
     sample_timeout_s: float = param(0.5, "s", "rig-paced: silence of the rig after which the link is in fault",
                                     1e-3, 60.0, fmu="adapter")
+    settle_after_hold_s: float = param(0.01, "s", "rig-paced: after a tick no answer covered (the actuator held), "
+                                                  "the forces of this long are not taken as measured (the "
+                                                  "actuator's return to the wanted height disturbs them)",
+                                       0.0, 10.0, fmu="adapter")
     horizon_steps: int = param(AUTO, "1", "heights each answer carries for the rig's next ticks "
                                           "(docs/udp-protocol.md); \"auto\": the steps of 0.1 s, at most 64", 1, 64,
                                auto=True)
