@@ -9,9 +9,11 @@ FMU alone (in any master) reproduces the case; a master may still set parameters
 from __future__ import annotations
 
 import copy
+import ctypes
 import json
 import math
 import operator
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -188,6 +190,22 @@ def _accessor(slave, kind: type, vrs, write: bool):
     return found
 
 
+_HELD_THREADS: set[int] = set()
+
+
+def hold_thread_state() -> None:
+    """Keep this thread's Python thread state for the life of the thread.
+
+    pythonfmu enters Python from the host's thread with PyGILState_Ensure and leaves with PyGILState_Release.
+    In a thread Python did not start (the worker threads of libcosim or of a C host) the release destroys
+    the thread state it made, so every call made a new one: a new frame stack (mmap, page faults, munmap),
+    a large part of a step's cost. One Ensure never released keeps the state: the next calls reuse it."""
+    ident = threading.get_ident()
+    if ident not in _HELD_THREADS:
+        _HELD_THREADS.add(ident)
+        ctypes.pythonapi.PyGILState_Ensure()
+
+
 class PantohilSlave(Fmi2Slave):
     """An FMU whose whole state can be taken and put back (fmi2GetFMUstate/fmi2SetFMUstate) and serialized
     (fmi2SerializeFMUstate/fmi2DeSerializeFMUstate), through pythonfmu's state hooks.
@@ -221,18 +239,22 @@ class PantohilSlave(Fmi2Slave):
     def get_real(self, vrs):
         """fmi2GetReal: the values and errors of pythonfmu's, read by attribute name without its
         per-variable closures (a fraction of the cost per call)."""
+        hold_thread_state()
         return _accessor(self, Real, vrs, False)(self)
 
     def get_integer(self, vrs):
         """fmi2GetInteger, as get_real."""
+        hold_thread_state()
         return _accessor(self, Integer, vrs, False)(self)
 
     def set_real(self, vrs, values):
         """fmi2SetReal: each value set on its variable's attribute, as pythonfmu's setter does."""
+        hold_thread_state()
         _accessor(self, Real, vrs, True)(self, values)
 
     def set_integer(self, vrs, values):
         """fmi2SetInteger, as set_real."""
+        hold_thread_state()
         _accessor(self, Integer, vrs, True)(self, values)
 
     def constants(self) -> dict[str, object]:

@@ -499,41 +499,74 @@ def _limits(state: RunState):
 
 def _diverged(master, span: int, i_f: int, i_z: int, dt: float) -> _Stop:
     out = master.values["catenary"]
-    return _Stop("diverged", f"diverged at t = {master.k * dt:.3f} s (span {span}): force {out[i_f]:.4g} N, "
-                             f"height {out[i_z]:.4g} m beyond run.force_limit_N / run.height_limit_m")
+    return _diverged_at(master.k * dt, span, out[i_f], out[i_z])
+
+
+def _diverged_at(t_s: float, span: int, force_N: float, height_m: float) -> _Stop:
+    return _Stop("diverged", f"diverged at t = {t_s:.3f} s (span {span}): force {force_N:.4g} N, "
+                             f"height {height_m:.4g} m beyond run.force_limit_N / run.height_limit_m")
 
 
 def _steps(state: RunState, span: int) -> str | None:
-    """The steps of one span; "interrupted" if a stop was requested before one of them."""
+    """The steps of one span; "interrupted" if a stop was requested before one of them. The limits and
+    the link are checked after every `master.steps_per_check` steps (1 but for libcosim, which is read
+    back a block of steps at a time)."""
     master, pacer, stop, dt = state.master, state.pacer, state.stop, state.case.dt_s
-    i_f, i_z, f_lim, z_lim, link_col = _limits(state)
+    limits = _limits(state)
+    i_f, i_z, f_lim, z_lim, _ = limits
     step_observers = [o for o in state.observers if o.wants_steps]
+    end = (span + 1) * state.case.samples_per_span
     if pacer is None and not step_observers and master.steps_a_span_at_once:  # the in-process engine
-        outcome = master.run_steps((span + 1) * state.case.samples_per_span - master.k, stop, f_lim, z_lim)
+        outcome = master.run_steps(end - master.k, stop, f_lim, z_lim)
         if outcome == "diverged":
             raise _diverged(master, span, i_f, i_z, dt)
         return outcome
-    for _ in range(state.case.samples_per_span):
+    block = 1 if step_observers else master.steps_per_check
+    while master.k < end:
         if stop.requested:
             return "interrupted"
-        k = master.k
-        if pacer is not None:
-            pacer.wait(k)
-        master.step()
-        if pacer is not None:
-            pacer.done(k)
+        k0 = master.k
+        count = min(block, end - k0)
+        if pacer is None:
+            master.step_block(count)
+        else:
+            for k in range(k0, k0 + count):
+                pacer.wait(k)
+                master.step()
+                pacer.done(k)
+        _check_steps(state, span, k0, master.k, limits)
+        for observer in step_observers:
+            observer.on_step(state, k0)
+    return None
+
+
+def _check_steps(state: RunState, span: int, k0: int, k1: int, limits: tuple) -> None:
+    """Stop the run if a step of k0..k1-1 left run.force_limit_N or run.height_limit_m (or went NaN), or
+    the link is in fault after it."""
+    master, dt = state.master, state.case.dt_s
+    i_f, i_z, f_lim, z_lim, link_col = limits
+    if k1 - k0 == 1:  # one step (the common case of the fmpy master): no arrays
         out = master.values["catenary"]
         if not (abs(out[i_f]) <= f_lim and abs(out[i_z]) <= z_lim):  # also catches NaN
-            raise _diverged(master, span, i_f, i_z, dt)
-        if link_col is not None and master.int_value("adapter", "link_state", k) == LINK_FAULT:
-            if k == 0 and not master.int_value("adapter", "session_started", 0):
-                raise _Stop("link_lost", _session_refused(master.int_value("adapter", "rig_refusal", 0),
-                                                          state.prepared.options.hardware))
-            raise _Stop("link_lost", f"link to the rig lost at t = {master.k * dt:.3f} s: "
-                                     f"{_link_fault_reason(state.case, state.rig_paced)}; last position held")
-        for observer in step_observers:
-            observer.on_step(state, k)
-    return None
+            raise _diverged_at(k1 * dt, span, out[i_f], out[i_z])
+        fault = link_col is not None and master.int_value("adapter", "link_state", k0) == LINK_FAULT
+        k = k0
+    else:
+        force = master.column("catenary", "force_at_sample", k0, k1)
+        height = master.column("catenary", "height_command", k0, k1)
+        bad = ~((np.abs(force) <= f_lim) & (np.abs(height) <= z_lim))  # also catches NaN
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise _diverged_at((k0 + i + 1) * dt, span, force[i], height[i])
+        faults = master.column("adapter", "link_state", k0, k1) == LINK_FAULT if link_col is not None else None
+        fault = faults is not None and bool(faults.any())
+        k = k0 + int(np.argmax(faults)) if fault else k0
+    if fault:
+        if k == 0 and not master.int_value("adapter", "session_started", 0):
+            raise _Stop("link_lost", _session_refused(master.int_value("adapter", "rig_refusal", 0),
+                                                      state.prepared.options.hardware))
+        raise _Stop("link_lost", f"link to the rig lost at t = {(k + 1) * dt:.3f} s: "
+                                 f"{_link_fault_reason(state.case, state.rig_paced)}; last position held")
 
 
 def step_span(state: RunState, span: int) -> tuple[str, str] | None:

@@ -21,6 +21,15 @@ class RecordingMaster:
     keeps the last `capacity` steps (what the caller logs and summarises), never more."""
 
     steps_a_span_at_once = False  # True: the master has `run_steps(count, stop, force_limit, height_limit)`
+    steps_per_check = 1  # steps between the run's checks of its limits (records up to date at least as often)
+
+    def step_block(self, count: int) -> None:
+        """`count` steps, recorded."""
+        for _ in range(count):
+            self.step()
+
+    def sync(self) -> None:
+        """Bring the records up to date (a master that records as it steps has nothing to do)."""
 
     def _init_records(self, descriptions: dict, connections, capacity: int) -> None:
         self.capacity = capacity
