@@ -78,7 +78,7 @@ class LinkConfig:
     pipeline_steps: int = 1
     receive_timeout_s: float = 0.0003
     sample_timeout_s: float = 0.5
-    settle_after_hold_s: float = 0.01
+    settle_after_hold_s: float = 0.1
     tolerated_losses: int = 50
     horizon_steps: int = 1
     local_host: str = ""

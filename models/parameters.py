@@ -185,7 +185,7 @@ class LinkSection:
                                         "per rig tick, answered at once)", choices=("model", "rig"), fmu="adapter")
     sample_timeout_s: float = param(0.5, "s", "rig-paced: silence of the rig after which the link is in fault",
                                     1e-3, 60.0, fmu="adapter")
-    settle_after_hold_s: float = param(0.01, "s", "rig-paced: after a tick no answer covered (the actuator held), "
+    settle_after_hold_s: float = param(0.1, "s", "rig-paced: after a tick no answer covered (the actuator held), "
                                                   "the forces of this long are not taken as measured (the "
                                                   "actuator's return to the wanted height disturbs them)",
                                        0.0, 10.0, fmu="adapter")

@@ -12,7 +12,7 @@ machine's load. Not a timed test.
 
     python tests/benchmarks/bench_horizon_stalls.py [--dt 0.002] [--drift-ppm 100] [--duration 120]
         [--stall-ms 10 40] [--every-s 0.5 2] [--long-stall-s 0.3] [--master fmpy|libcosim]
-        [--repeats 1] [--seed 1] [--set SECTION.KEY=VALUE ...]
+        [--repeats 1] [--seed 1] [--set SECTION.KEY=VALUE ...] [--keep DIR]
 """
 from __future__ import annotations
 
@@ -119,7 +119,7 @@ def report(row: dict, reference: np.ndarray | None, virtual: np.ndarray) -> None
           f"{row['rig_uncovered'] - row['uncovered']} of them uncovered); answer p50/p99/max "
           f"{a['p50']:.0f}/{a['p99']:.0f}/{a['max']:.0f} us; converged span vs no-stall run {vs_ref:.4f} %, vs "
           f"virtual HIL {vs_virtual:.4f} % of the std; load {row['load'][0]:.1f} -> {row['load'][1]:.1f}"
-          + (f"; stderr: {row['stderr']}" if row["exit"] not in (0,) else ""), flush=True)
+          + (f"; {row['message']}; stderr: {row['stderr']}" if row["exit"] not in (0,) else ""), flush=True)
 
 
 def main() -> None:
@@ -134,11 +134,12 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    ap.add_argument("--keep", metavar="DIR", help="keep the run folders and the emulator's records in DIR")
     args = ap.parse_args()
     args.jitter_us = 0.0
     print(f"uptime: {os.popen('uptime').read().strip()}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
+        tmp = Path(args.keep) if args.keep else Path(tmp)
         proc = cli("run", "--engine", "inprocess", "--out", str(tmp / "virtual"), "--quiet", *case_sets(args),
                    "--set", f"run.duration_s={args.duration}")
         assert proc.returncode == 0, proc.stdout + proc.stderr
