@@ -46,7 +46,7 @@ class Registry(Generic[T]):
             else:
                 eps = self._entry_points()
                 if name not in eps:
-                    raise InputError(f"{key or self.kind}: {name!r} is not a {self.kind} model (registered: "
+                    raise InputError(f"{key or self.kind}: {name!r} is not a {self.kind} (registered: "
                                      f"{', '.join(self.names())})", key=key or None)
                 obj = eps[name].load()
                 self._loaded[name] = obj() if isinstance(obj, type) else obj
@@ -60,6 +60,6 @@ class Registry(Generic[T]):
         """The name of a code; InputError for a code no model has."""
         names = self.names()
         if not 0 <= int(code) < len(names):
-            raise InputError(f"{key or self.kind}: code {code} names no {self.kind} model (0 .. {len(names) - 1})",
+            raise InputError(f"{key or self.kind}: code {code} names no {self.kind} (0 .. {len(names) - 1})",
                              key=key or None)
         return names[int(code)]

@@ -20,6 +20,7 @@ from pathlib import Path
 from pantohil.models.case import CaseError, load_case
 from pantohil.models.data import catalog
 from pantohil.models.errors import ExitCode, FmuFailure, PantohilError
+from pantohil.orchestrator.masters import DEFAULT_MASTER, MASTERS
 
 EXIT_BAD_INPUT = int(ExitCode.BAD_INPUT)
 
@@ -75,8 +76,9 @@ def _add_run_command(sub) -> None:
     _add_case_args(run, optional=True)
     run.add_argument("--out", type=Path, help="run folder, new or empty (default: runs/<case>-<time>)")
     run.add_argument("--overwrite", action="store_true", help="replace the contents of --out if it is not empty")
-    run.add_argument("--master", choices=("fmpy", "libcosim"), default="fmpy",
-                     help="co-simulation master: pantohil's fmpy master or OSP's libcosim (default fmpy)")
+    run.add_argument("--master", choices=MASTERS.names(), default=DEFAULT_MASTER,
+                     help="co-simulation master: fmpy, pantohil's own (default); libcosim, OSP's; or one another "
+                          "package registers (entry points pantohil.masters)")
     run.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu",
                      help="fmu: the FMUs in the master (default); inprocess: the same models stepped in this "
                           "process without the FMI boundary, same result, much faster (virtual HIL only)")
@@ -360,8 +362,8 @@ def _resume_case(args):
     from pantohil.orchestrator import checkpoint
 
     given = [flag for flag, value in (("a case file", args.case), ("--set", args.overrides), ("--out", args.out),
-                                      ("--hardware", args.hardware), ("--master libcosim", args.master != "fmpy"))
-             if value]
+                                      ("--hardware", args.hardware),
+                                      (f"--master {args.master}", args.master != DEFAULT_MASTER)) if value]
     if given:
         raise CaseError(f"--resume: continues RUN_FOLDER with its own case and FMUs; remove {', '.join(given)}")
     state = checkpoint.load(args.resume)

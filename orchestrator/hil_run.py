@@ -41,7 +41,7 @@ from . import checkpoint
 from .case_reference import case_dropper_positions
 from .case_reference import closed_form_reference as closed_form_reference  # re-exported (tests, callers)
 from .inprocess import ENGINES, InProcessMaster
-from .master import JacobiMaster
+from .masters import MASTERS
 from .pacing import Pacer, lock_memory, set_realtime_priority, unlock_memory
 from .recorder import McapRecorder, McapWriter
 from .rig_clock import Percentiles
@@ -50,7 +50,6 @@ from .run_observers import CheckpointObserver, LiveObserver, McapObserver, RunOb
 from .run_summary import EXIT_LINK_LOST, RunSummary
 from .stopping import StopRequest, stop_on_signals
 
-MASTERS = ("fmpy", "libcosim")
 LOG_WRITERS = ("process", "inline")
 LINK_OK, LINK_FAULT = link_client.LINK_OK, link_client.LINK_FAULT
 __all__ = ["EXIT_LINK_LOST", "RunInterrupted", "RunObserver", "RunOptions", "RunSummary", "delay_plan", "run_case"]
@@ -210,15 +209,15 @@ def _delay_refusal(case: Case, loop: int, d: int, hardware: bool) -> str:
 
 def run_topology(case: Case, options: RunOptions) -> Topology:
     """The loop of the run, with the dropper corrections logged beside the catenary for a slackening PFEM."""
-    if options.master_kind not in MASTERS:
-        raise CaseError(f"master: must be one of {', '.join(MASTERS)} (got {options.master_kind!r})")
+    master = MASTERS.get(options.master_kind, "master")
     _check_engine(options)
     if options.log_writer not in LOG_WRITERS:
         raise CaseError(f"log_writer: must be one of {', '.join(LOG_WRITERS)} (got {options.log_writer!r})")
     rig_paced = is_rig_paced(case, options)
     if options.hardware is not None and (options.system is not None or
-                                         (options.master_kind != "fmpy" and not rig_paced)):
-        raise CaseError("hardware: a hardware run uses a case file, and the fmpy master unless it is rig-paced")
+                                         (not master.model_paced_hardware and not rig_paced)):
+        raise CaseError(f"hardware: a hardware run uses a case file, and a master that may drive a rig in lockstep "
+                        f"(not {options.master_kind}) unless it is rig-paced")
     if rig_paced and options.realtime:
         raise CaseError("--realtime: a rig-paced run goes at the rig's pace; drop --realtime")
     run = case.values["run"]
@@ -281,15 +280,13 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
             return summarise(state)
 
 
-MASTER_PACKAGES = {"libcosim": ("libcosimpy", "libcosim")}  # master -> (module it needs, pantohil's extra)
-
-
 def _check_master_installed(master_kind: str) -> None:
     """A master whose package is missing: one line naming the extra to install, before anything is written."""
     import importlib
 
-    if master_kind in MASTER_PACKAGES:
-        module, extra = MASTER_PACKAGES[master_kind]
+    requires = MASTERS.get(master_kind, "master").requires
+    if requires is not None:
+        module, extra = requires
         try:
             importlib.import_module(module)
         except ImportError:
@@ -298,7 +295,8 @@ def _check_master_installed(master_kind: str) -> None:
 
 
 def _saves_checkpoints(options: RunOptions, topology: Topology) -> bool:
-    return (options.checkpoint_info is not None and options.master_kind == "fmpy" and topology.name == VIRTUAL.name
+    return (options.checkpoint_info is not None and MASTERS.get(options.master_kind).checkpoints
+            and topology.name == VIRTUAL.name
             and options.system is None and options.engine == "fmu")
 
 
@@ -308,7 +306,8 @@ def _check_engine(options: RunOptions) -> None:
         raise CaseError(f"--engine: must be one of {', '.join(ENGINES)} (got {options.engine!r})")
     if options.engine == "fmu":
         return
-    clash = ("--hardware" if options.hardware is not None else "--master libcosim" if options.master_kind != "fmpy"
+    replaced = MASTERS.get(options.master_kind, "master").replaced_by_inprocess
+    clash = ("--hardware" if options.hardware is not None else f"--master {options.master_kind}" if not replaced
              else "an SSP file" if options.system is not None else "--resume" if options.resume is not None else None)
     if clash is not None:
         raise CaseError(f"--engine inprocess: not with {clash} (the in-process engine runs the virtual HIL of a "
@@ -408,13 +407,9 @@ def start(state: RunState) -> None:
     try:
         if options.engine == "inprocess":
             state.master = InProcessMaster(case, prepared.connections, prepared.parameters, case.dt_s, capacity)
-        elif options.master_kind == "libcosim":
-            from .libcosim_master import LibcosimMaster
-
-            state.master = LibcosimMaster(prepared.fmus, prepared.connections, prepared.parameters, case.dt_s,
-                                          capacity)
         else:
-            state.master = JacobiMaster(prepared.fmus, prepared.connections, prepared.parameters, case.dt_s, capacity)
+            state.master = MASTERS.get(options.master_kind).make(prepared.fmus, prepared.connections,
+                                                                 prepared.parameters, case.dt_s, capacity)
     except BaseException:
         mcap.recorder.close()
         raise
@@ -463,7 +458,7 @@ def step_until_done(state: RunState) -> None:
                          initial=state.first_span)
     t_start, cpu_start = time.perf_counter(), time.process_time()
     try:
-        if hardware is not None and state.prepared.options.master_kind == "fmpy":
+        if hardware is not None and MASTERS.get(state.prepared.options.master_kind).model_paced_hardware:
             _check_session_start(state.master, hardware)
         if state.pacer is not None:
             state.pacer.start()

@@ -88,7 +88,7 @@ class RigidMassModel:
         return rigid_mass_linear(params, dt_s)
 
 
-PANTOGRAPHS: Registry[PantographModel] = Registry("pantograph", "pantohil.pantographs",
+PANTOGRAPHS: Registry[PantographModel] = Registry("pantograph model", "pantohil.pantographs",
                                                   {"chain": Chain, "rigid_mass": RigidMassModel})
 """Every pantograph model by name; `[pantograph] model` chooses one."""
 
