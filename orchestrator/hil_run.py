@@ -38,8 +38,8 @@ from pantohil.models.hil.loop import ConvergenceMonitor
 from pantohil.models.progress import progress
 
 from . import checkpoint
-from .case_reference import case_dropper_positions
-from .case_reference import closed_form_reference as closed_form_reference  # re-exported (tests, callers)
+from .run_reference import case_dropper_positions
+from .run_reference import closed_form_reference as closed_form_reference  # re-exported (tests, callers)
 from .inprocess import ENGINES, InProcessMaster
 from .masters import MASTERS
 from .pacing import Pacer, lock_memory, set_realtime_priority, unlock_memory

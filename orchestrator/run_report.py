@@ -11,7 +11,7 @@ from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
 from pantohil.models.pantograph.interface import pantograph_model
 
 from . import report
-from .case_reference import case_dropper_positions, closed_form_reference
+from .run_reference import case_dropper_positions, closed_form_reference
 from .run_summary import ForceStatistics, RunSummary, Timing
 
 FILTER_HZ = 20.0
