@@ -114,8 +114,7 @@ class LibcosimMaster(RecordingMaster):
             if not self._ex.step(n):
                 raise RuntimeError(f"libcosim step {self.k} failed")
             per_step = (time.perf_counter_ns() - t0) // n
-            for k in range(self.k, self.k + n):
-                self.step_ns[self.names[0]][k % self.capacity] = per_step
+            self.step_ns[self.names[0]][self.rows(self.k, self.k + n)] = per_step
             self.k += n
             count -= n
             if self.k - self._synced >= self.steps_per_check:

@@ -19,10 +19,37 @@ CATENARIES_DIR = ROOT / "models" / "data" / "catenaries"
 PATIENT_LINK = "link.receive_timeout_s=1.0"
 
 
-def pantohil(*args: str, cwd: Path | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
-    """Run the installed CLI as a user would."""
+def pantohil(*args: str, cwd: Path | None = None, timeout: float = 600,
+             env: dict | None = None) -> subprocess.CompletedProcess:
+    """Run the installed CLI as a user would (in `env`, e.g. one that sees a plugin package)."""
     return subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout)
+                          capture_output=True, text=True, timeout=timeout, env=env)
+
+
+def install_package(tmp_path: Path, pyproject: str, module: str, text: str) -> dict:
+    """A package of one module (`module`.py holding `text`) outside pantohil, pip-installed into a folder of
+    its own; the environment in which Python sees it."""
+    src, site = tmp_path / "src", tmp_path / "site"
+    src.mkdir()
+    (src / "pyproject.toml").write_text(pyproject)
+    (src / f"{module}.py").write_text(text)
+    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(site), str(src)],
+                   check=True, capture_output=True, timeout=600)
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(site), os.environ.get("PYTHONPATH")])))
+
+
+def package_lines_matching(pattern, outside: Path) -> list[str]:
+    """Every line of the package's modules (models, fmus, builder, orchestrator) that `pattern` (a compiled
+    regular expression) finds, as "path:line: text", but in the module `outside` (relative to the root)."""
+    found = []
+    for layer in ("models", "fmus", "builder", "orchestrator"):
+        for path in sorted((ROOT / layer).rglob("*.py")):
+            if path.relative_to(ROOT) == outside:
+                continue
+            for no, line in enumerate(path.read_text().splitlines(), 1):
+                if pattern.search(line):
+                    found.append(f"{path.relative_to(ROOT)}:{no}: {line.strip()}")
+    return found
 
 
 def plain_install(venv: Path) -> Path:

@@ -6,9 +6,8 @@ refused by its declared capabilities."""
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
+
+from conftest import install_package, pantohil
 
 PYPROJECT = """\
 [build-system]
@@ -98,28 +97,13 @@ KIND = MasterKind(PlainJacobi)
 SHORT = ["--set", "run.max_spans=3", "--set", "run.duration_s=2.5", "--quiet"]
 
 
-def _install(tmp_path) -> dict:
-    src, site = tmp_path / "src", tmp_path / "site"
-    src.mkdir()
-    (src / "pyproject.toml").write_text(PYPROJECT)
-    (src / "plain_jacobi.py").write_text(MODULE)
-    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(site), str(src)],
-                   check=True, capture_output=True, timeout=600)
-    return dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(site), os.environ.get("PYTHONPATH")])))
-
-
-def _cli(env, *args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", *args], capture_output=True,
-                          text=True, env=env, timeout=1800)
-
-
 def test_a_master_from_another_package_runs_the_virtual_hil_as_the_fmpy_master(tmp_path):
-    env = _install(tmp_path)
-    assert "plain_jacobi" in _cli(env, "run", "--help").stdout
+    env = install_package(tmp_path, PYPROJECT, "plain_jacobi", MODULE)
+    assert "plain_jacobi" in pantohil("run", "--help", env=env).stdout
     runs = {}
     for master in ("plain_jacobi", "fmpy"):
         out = tmp_path / master
-        proc = _cli(env, "run", "--master", master, "--out", str(out), *SHORT)
+        proc = pantohil("run", "--master", master, "--out", str(out), *SHORT, env=env, timeout=1800)
         assert proc.returncode == 0, proc.stderr
         runs[master] = (json.loads((out / "summary.json").read_text()), (out / "steady_span.csv").read_bytes())
     (plugin, plugin_span), (fmpy, fmpy_span) = runs["plain_jacobi"], runs["fmpy"]
@@ -127,5 +111,6 @@ def test_a_master_from_another_package_runs_the_virtual_hil_as_the_fmpy_master(t
     assert plugin_span == fmpy_span  # the same FMUs in the same Jacobi order: the same doubles
     # it declares no lockstep rig runs: refused before anything is written
     out = tmp_path / "lockstep"
-    proc = _cli(env, "run", "--master", "plain_jacobi", "--hardware", "127.0.0.1:9", "--out", str(out), "--quiet")
+    proc = pantohil("run", "--master", "plain_jacobi", "--hardware", "127.0.0.1:9", "--out", str(out), "--quiet",
+                    env=env)
     assert proc.returncode == 2 and "not plain_jacobi" in proc.stderr and not out.exists()

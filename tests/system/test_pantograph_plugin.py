@@ -7,9 +7,8 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import subprocess
-import sys
+
+from conftest import install_package, pantohil
 
 PYPROJECT = """\
 [build-system]
@@ -55,26 +54,14 @@ class StiffHead:
 SHORT = ["--set", "run.max_spans=3", "--set", "run.duration_s=2.5", "--quiet"]
 
 
-def _install(tmp_path):
-    src, site = tmp_path / "src", tmp_path / "site"
-    src.mkdir()
-    (src / "pyproject.toml").write_text(PYPROJECT)
-    (src / "stiff_head.py").write_text(MODULE)
-    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(site), str(src)],
-                   check=True, capture_output=True, timeout=600)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(site), os.environ.get("PYTHONPATH")])))
-    return env
-
-
 def _run(env, out, *args):
-    proc = subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--out", str(out), *args, *SHORT],
-                          capture_output=True, text=True, env=env, timeout=1800)
+    proc = pantohil("run", "--out", str(out), *args, *SHORT, env=env, timeout=1800)
     assert proc.returncode == 0, proc.stderr
     return json.loads((out / "summary.json").read_text()), (out / "steady_span.csv").read_bytes()
 
 
 def test_a_pantograph_model_from_another_package_runs_on_both_paths_to_the_bit(tmp_path):
-    env = _install(tmp_path)
+    env = install_package(tmp_path, PYPROJECT, "stiff_head", MODULE)
     fmu = _run(env, tmp_path / "fmu", "--set", "pantograph.model=stiff_head")
     inprocess = _run(env, tmp_path / "inprocess", "--set", "pantograph.model=stiff_head", "--engine", "inprocess")
     chain = _run(env, tmp_path / "chain", "--set", "pantograph.contact_stiffness_N_m=100000", "--engine", "inprocess")
@@ -84,18 +71,15 @@ def test_a_pantograph_model_from_another_package_runs_on_both_paths_to_the_bit(t
 
 
 def test_an_unregistered_model_is_one_line_naming_the_key(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--out", str(tmp_path / "x"),
-                           "--set", "pantograph.model=stiff_head", "--quiet"], capture_output=True, text=True,
-                          timeout=600)
+    proc = pantohil("run", "--out", str(tmp_path / "x"), "--set", "pantograph.model=stiff_head", "--quiet")
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and "pantograph.model" in lines[0], proc.stderr
     assert not (tmp_path / "x").exists()
 
 
 def _spectral_radius(env, out, *args):
-    proc = subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", "stability", "--update", "step",
-                           "--fmax", "25", "--delay", "8", "--relaxation", "0.1", "--workers", "1", "--out", str(out),
-                           "--quiet", *args], capture_output=True, text=True, env=env, timeout=1800)
+    proc = pantohil("stability", "--update", "step", "--fmax", "25", "--delay", "8", "--relaxation", "0.1",
+                    "--workers", "1", "--out", str(out), "--quiet", *args, env=env, timeout=1800)
     assert proc.returncode == 0, proc.stderr
     with open(out / "stability.csv") as fh:
         rows = list(csv.DictReader(fh))
@@ -105,7 +89,7 @@ def _spectral_radius(env, out, *args):
 
 def test_the_stability_map_of_a_plugin_model_is_its_physics(tmp_path):
     """`pantohil stability` on the plugin at k_c equals pantohil's chain at 2 k_c (the same linear map)."""
-    env = _install(tmp_path)
+    env = install_package(tmp_path, PYPROJECT, "stiff_head", MODULE)
     plugin = _spectral_radius(env, tmp_path / "plugin", "--contact-stiffness", "5e4", "--set",
                               "pantograph.model=stiff_head")
     chain = _spectral_radius(env, tmp_path / "chain", "--contact-stiffness", "1e5")

@@ -7,11 +7,10 @@ import re
 from pathlib import Path
 
 import pytest
+from conftest import package_lines_matching
 
 from pantohil.models.errors import InputError
 from pantohil.orchestrator.masters import DEFAULT_MASTER, MASTERS
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_the_built_in_masters_and_what_they_can_do():
@@ -30,12 +29,5 @@ def test_an_unknown_master_is_refused_naming_the_key():
 
 def test_no_switch_on_a_masters_name_outside_the_registry():
     switch = re.compile(r"""(==|!=|\bin)\s*\(?\s*["'](fmpy|libcosim)["']""")
-    found = []
-    for layer in ("models", "fmus", "builder", "orchestrator"):
-        for path in sorted((ROOT / layer).rglob("*.py")):
-            if path.name == "masters.py" and path.parent.name == "orchestrator":
-                continue
-            for no, line in enumerate(path.read_text().splitlines(), 1):
-                if switch.search(line):
-                    found.append(f"{path.relative_to(ROOT)}:{no}: {line.strip()}")
+    found = package_lines_matching(switch, Path("orchestrator", "masters.py"))
     assert not found, found

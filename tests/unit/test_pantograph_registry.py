@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import package_lines_matching
 
 from pantohil.models.errors import InputError
 from pantohil.models.pantograph.interface import PANTOGRAPHS, SteppedPantograph, pantograph_model
 from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.parameters import PantographSection
 
-ROOT = Path(__file__).resolve().parents[2]
 DT_S = 0.001
 
 
@@ -76,12 +76,5 @@ def test_an_unknown_model_or_code_is_an_input_error_naming_the_key():
 
 def test_no_switch_on_a_pantograph_models_name_outside_the_registry():
     switch = re.compile(r"""(==|!=|\bin)\s*\(?\s*["'](chain|rigid_mass)["']|pantograph_model\s*(==|!=)\s*\d""")
-    found = []
-    for layer in ("models", "fmus", "builder", "orchestrator"):
-        for path in sorted((ROOT / layer).rglob("*.py")):
-            if path.name == "interface.py" and path.parent.name == "pantograph":
-                continue
-            for no, line in enumerate(path.read_text().splitlines(), 1):
-                if switch.search(line):
-                    found.append(f"{path.relative_to(ROOT)}:{no}: {line.strip()}")
+    found = package_lines_matching(switch, Path("models", "pantograph", "interface.py"))
     assert not found, found
