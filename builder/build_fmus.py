@@ -19,18 +19,18 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
-import numpy as np
 import pythonfmu
 
 from pantohil.fmus import fmu_support
 from pantohil.models.case import Case
-from pantohil.models.catenary.profile import write_profile_csv
+from pantohil.models.catenary.interface import catenary_model
+from pantohil.models.parameters import fmu_values
+from pantohil.models.rig.compensation import write_response_csv
 from pantohil.models.rig.rig_file import rig_to_toml
 from pantohil.models.input_files import InputFileError, read_input_bytes
 from pantohil.models.storage import atomic_path, cache_folder, cache_root, write_text_atomic
 
 from . import loader
-from .operators import case_operators
 from .system import FMU_NAMES, loop_latency_steps
 
 BUILDER_VERSION = "15"
@@ -60,7 +60,7 @@ def fmu_parameters(case: Case, delay_steps: int,
                     "local_host": case.values["link"]["local_host"], "key_file": case.values["link"]["key_file"],
                     "horizon_steps": case.horizon_steps},
     }
-    return {name: {**fmu_support.case_values(name, case.values, resolved), **extra} for name, extra in derived.items()}
+    return {name: {**fmu_values(name, case.values, resolved), **extra} for name, extra in derived.items()}
 
 
 def default_delay_steps(case: Case) -> int:
@@ -79,9 +79,9 @@ def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
 
 
 def stage_case_data(name: str, params: dict, case: Case, stage: Path, link: bool = False) -> list[Path]:
-    """Write the case data an FMU reads from resources/ into `stage`: its parameter values, the profile,
-    the rig file, the rig's response and the PFEM operators. The in-process engine initialises the same
-    FMU classes from such a folder; `link` puts the (large) operator file in as a symbolic link."""
+    """Write the case data an FMU reads from resources/ into `stage`: its parameter values, the rig file,
+    the rig's response and what the catenary model stages (models/catenary/interface.py). The in-process
+    engine initialises the same FMU classes from such a folder; `link`: large files as symbolic links."""
     files = []
     (stage / fmu_support.PARAMETERS_FILE).write_text(json.dumps(params, indent=1, sort_keys=True))
     files.append(stage / fmu_support.PARAMETERS_FILE)
@@ -91,21 +91,9 @@ def stage_case_data(name: str, params: dict, case: Case, stage: Path, link: bool
         (stage / "rig.toml").write_text(rig_to_toml(case.rig_spec, f"rig of case {case.name}"))
         files.append(stage / "rig.toml")
     if name == "catenary":
-        write_profile_csv(stage / "profile.csv", case.profile)
-        files.append(stage / "profile.csv")
         if case.compensates_rig_response:
-            gz, gf = case.rig_response()
-            table = np.column_stack([np.arange(len(gz)), gz.real, gz.imag, gf.real, gf.imag])
-            np.savetxt(stage / "rig_response.csv", table, delimiter=",", comments="", fmt="%.17g",
-                       header="harmonic,height_re,height_im,force_re,force_im")
-            files.append(stage / "rig_response.csv")
-        if case.model == "pfem":
-            op = case_operators(case)
-            if link:
-                (stage / "operators.npz").symlink_to(Path(op.path).resolve())
-            else:
-                shutil.copy2(op.path, stage / "operators.npz")
-            files.append(stage / "operators.npz")
+            files.append(write_response_csv(stage, *case.rig_response()))
+        files += catenary_model(case).stage(case, stage, link)
     return files
 
 

@@ -75,26 +75,6 @@ def case_variables(fmu: str) -> list[Var]:
     return [v for key in fmu_keys(fmu) for v in _key_variables(key)]
 
 
-def case_values(fmu: str, values: dict, resolved: dict) -> dict:
-    """{FMU variable: value} of the case keys that reach an FMU. `values` is the validated case
-    ({section: {key: value}}); `resolved` gives, by dotted key, the value in use where the case's
-    differs ("auto", or a list the model shortens)."""
-    out = {}
-    for key in fmu_keys(fmu):
-        value = resolved.get(key.dotted, values[key.section][key.name])
-        names = fmu_variable_names(key)
-        if key.param.choices and isinstance(key.param.choices[0], str):
-            out[names[0]] = key.param.choices.index(value)
-        elif key.type is bool:
-            out[names[0]] = int(value)
-        elif key.param.fmu_items:
-            padded = list(value) + [0.0] * (len(names) - len(value))
-            out.update(zip(names, padded, strict=True))
-        else:
-            out[names[0]] = value
-    return out
-
-
 def load_parameters(resources: str | None) -> dict:
     """The case values an FMU carries in resources/parameters.json (empty if there are none)."""
     if not resources:

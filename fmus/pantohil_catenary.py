@@ -1,27 +1,22 @@
 """Periodic catenary FMU: receives the measured contact force, runs the HIL iteration and commands the
-contact-point height, advanced by the delay D (Paper B sec. 3, Paper D sec. 3). Two catenary models:
-ASM2, the analytical string (Papers A-B), and the PFEM, one span of a finite-element catenary with
-periodic boundaries and dropper slackening (Papers C-D), whose operators it carries in its resources."""
+contact-point height, advanced by the delay D (Paper B sec. 3, Paper D sec. 3). The iteration is the
+registered catenary model's (models/catenary/interface.py) that `catenary_model` names: ASM2, the
+analytical string (Papers A-B), the PFEM, one span of a finite-element catenary with periodic boundaries
+and dropper slackening (Papers C-D), or another package's; built from what it staged in resources/."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
-from pantohil.models.catenary.asm.string import AsmParameters
-from pantohil.models.hil.loop import MAX_HORIZON_STEPS, UPDATES, HilSettings, PeriodicHil
-from pantohil.models.catenary.pfem.operator_file import load_operators
-from pantohil.models.hil.droppers import PfemHil
-from pantohil.models.catenary.profile import read_profile_csv
-from pantohil.models.catenary.receptance import CirculantOperator, asm_operator, harmonic_count, reduce_harmonics
-from pantohil.models.rig.compensation import HarmonicCompensation
+from pantohil.models.catenary.grid import SpanGrid
+from pantohil.models.catenary.interface import CATENARIES
+from pantohil.models.catenary.pfem.model import MAX_DROPPERS
+from pantohil.models.catenary.receptance import harmonic_count
+from pantohil.models.hil.loop import MAX_HORIZON_STEPS, UPDATES, HilSettings
+from pantohil.models.rig.compensation import read_response_csv
 
-PROFILE_FILE = "profile.csv"
-OPERATOR_FILE = "operators.npz"
-RIG_RESPONSE_FILE = "rig_response.csv"
-MAX_DROPPERS = 12
-_NO_DROPPERS = np.zeros(0)  # the dropper outputs of an ASM, read every step (never written)
-ASM_FIELDS = ("tension_N", "density_kg_m", "support_stiffness_N_m2", "alpha_1_s", "beta_s")  # case keys = fields
+_NO_DROPPERS = np.zeros(0)  # the dropper outputs of a catenary without slackening, read every step (never written)
 
 VARIABLES = [
     *case_variables("catenary"),
@@ -108,6 +103,7 @@ VARIABLES = [
         for d in range(MAX_DROPPERS)
     ],
 ]
+_PARAMETER_NAMES = tuple(v.name for v in case_variables("catenary"))  # what a catenary model is built from
 
 
 class PantohilCatenary(PantohilSlave):
@@ -120,7 +116,6 @@ class PantohilCatenary(PantohilSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._hil = None
-        self._pfem = False
         self._ahead = None  # the horizon of this step, computed when a master first reads it
         register_all(self, VARIABLES)
 
@@ -134,11 +129,6 @@ class PantohilCatenary(PantohilSlave):
         """The static contact-line height at the span's samples."""
         return np.asarray(self._z0, dtype=float)
 
-    @property
-    def is_pfem(self) -> bool:
-        """Whether the operator is a PFEM's (else the ASM's)."""
-        return bool(self._pfem)
-
     def constants(self) -> dict[str, object]:
         """The operators, the profile and what the iteration precomputes from them (fixed after initialisation)."""
         if self._hil is None:
@@ -147,56 +137,34 @@ class PantohilCatenary(PantohilSlave):
 
     @property
     def structural(self) -> tuple[str, ...]:
-        """The parameters the built resources depend on: the sample grid and the profile (both models), the
-        rig's response file, and for the PFEM every catenary key (its operators are built from them)."""
+        """The parameters the built resources depend on: the sample grid and the profile, the rig's response
+        file, and those the model's staged resources fix (its `structural_keys`)."""
         grid = ("speed", "time_step", "samples_per_span", "span_m", "catenary_model", "max_frequency_hz",
                 "rig_compensation")
-        return grid + ASM_FIELDS if self._built.get("catenary_model") == 1 else grid
+        built = self._built.get("catenary_model")
+        return grid if built is None else grid + CATENARIES.get(CATENARIES.name_of(built)).structural_keys
 
     def exit_initialization_mode(self):
-        """Build the operator (ASM2 from its parameters, or the PFEM operators in the resources) and the iteration."""
+        """Build the iteration of the registered catenary model that catenary_model names, from the staged
+        resources (models/catenary/interface.py)."""
         self.check_parameters()
         n = int(self.samples_per_span)
         self.harmonics = harmonic_count(self.max_frequency_hz, n, self.time_step)
         settings = HilSettings(update=UPDATES[self.hil_update], relaxation=self.relaxation,
                                delay_steps=self.delay_steps, ramp_steps=self.ramp_steps,
                                hold_steps=int(self.hold_steps))
-        comp = self._compensation(n) if self.rig_compensation == 1 else None
-        if self.catenary_model == 1:
-            ops = load_operators(Path(self.resources) / OPERATOR_FILE)
-            s = ops.settings
-            if s.samples_per_span != n or abs(s.dt_s - self.time_step) > 1e-12 or s.n_harmonics != self.harmonics:
-                raise ValueError(
-                    f"{OPERATOR_FILE} was built for N = {s.samples_per_span}, dt = {s.dt_s}, N_h = "
-                    f"{s.n_harmonics}; the parameters give N = {n}, dt = {self.time_step}, N_h = {self.harmonics}"
-                )
-            if ops.n_droppers > MAX_DROPPERS:
-                raise ValueError(
-                    f"the PFEM block has {ops.n_droppers} droppers; this FMU reports at most {MAX_DROPPERS}"
-                )
-            self._z0 = ops.z0
-            self._hil = PfemHil(ops, settings, self.dropper_relaxation, bool(self.droppers), comp)
-        else:
-            cat = AsmParameters(**{f: getattr(self, f) for f in ASM_FIELDS})
-            x = np.arange(n) * self.speed * self.time_step
-            self._z0 = read_profile_csv(Path(self.resources) / PROFILE_FILE, self.span_m).heights(x)
-            op = asm_operator(cat, self.speed, n, self.time_step, self.harmonics)
-            if comp is not None:
-                op = CirculantOperator(comp.compensate_kernel(op.kernel))
-            self._hil = PeriodicHil(op, reduce_harmonics(self._z0, self.harmonics), settings, comp)
-        self._pfem = self.catenary_model == 1
+        comp = read_response_csv(Path(self.resources), n, self.harmonics) if self.rig_compensation == 1 else None
+        model = CATENARIES.get(CATENARIES.name_of(self.catenary_model, "catenary_model"))
+        grid = SpanGrid(self.speed, self.time_step, n, self.harmonics, self.span_m)
+        parameters = {name: getattr(self, name) for name in _PARAMETER_NAMES}
+        self._hil, z0 = model.iteration(grid, parameters, Path(self.resources), settings, comp)
+        self._z0 = np.asarray(z0, dtype=float)
+        if getattr(self._hil, "nd", 0) > MAX_DROPPERS:
+            raise ValueError(f"the catenary has {self._hil.nd} slackening droppers; this FMU reports at most "
+                             f"{MAX_DROPPERS}")
         self._label = 0
         self._ahead = None
         self.height_command = 0.0 if self.ramp_steps > 0 else self._hil.command_at(self._hil.z, self.delay_steps % n)
-
-    def _compensation(self, n: int) -> HarmonicCompensation:
-        """The rig's gains at harmonics 0..N_h-1 (harmonic,height_re,height_im,force_re,force_im)."""
-        table = np.atleast_2d(np.loadtxt(Path(self.resources) / RIG_RESPONSE_FILE, delimiter=",", skiprows=1))
-        if table.shape[0] != self.harmonics or not np.array_equal(table[:, 0], np.arange(self.harmonics)):
-            raise ValueError(
-                f"{RIG_RESPONSE_FILE} has {table.shape[0]} harmonics; the parameters keep {self.harmonics}"
-            )
-        return HarmonicCompensation(n, table[:, 1] + 1j * table[:, 2], table[:, 3] + 1j * table[:, 4])
 
     def do_step(self, current_time, step_size):
         """Take the measured force of this step and output the height to command (Paper D eqs. 2-3, 10)."""
@@ -251,7 +219,7 @@ class PantohilCatenary(PantohilSlave):
 
     def _dropper_forces(self) -> np.ndarray:
         hil = self._hil
-        return hil.current_correction if (hil is not None and self._pfem and hil.nd) else _NO_DROPPERS
+        return hil.current_correction if (hil is not None and getattr(hil, "nd", 0)) else _NO_DROPPERS
 
 
 def _dropper_output(d: int) -> property:

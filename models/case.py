@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pantohil.models.catenary.asm.string import AsmParameters, receptance_direct
+from pantohil.models.catenary.asm.string import AsmParameters
+from pantohil.models.catenary.interface import CATENARIES
 from pantohil.models.catenary.profile import DropperProfile, ProfileError, TabulatedProfile, read_profile_csv
 from pantohil.models.catenary.receptance import harmonic_count
 from pantohil.models.data import CASES_DIR, catalog
@@ -279,8 +280,9 @@ class Case:
 
     def reference_height_m(self) -> float:
         """Wire height at which the pantograph's static force equals the uplift force: the mean
-        converged height z0_mean + H11(0) F_m, so that the converged mean force is F_m."""
-        h0 = float(np.real(receptance_direct(self.catenary, 0.0, self.speed_m_s)))
+        converged height z0_mean + H(0) F_m (the catenary model's static compliance), so that the
+        converged mean force is F_m."""
+        h0 = CATENARIES.get(self.model, "catenary.model").static_compliance_m_N(self)
         return float(np.mean(self.z0_samples())) + h0 * self.pantograph.uplift_force_N
 
     @property
@@ -449,20 +451,19 @@ def build_case(raw: dict, source: Path) -> Case:
     if not act["stroke_min_m"] < act["stroke_max_m"]:
         raise CaseError(f"actuator.stroke_max_m: must be above actuator.stroke_min_m ({act['stroke_min_m']:g} m)")
     profile = _check_profile(v, source)
-    model, definition = c["model"], None
-    if model == "pfem":
-        if not c["definition_file"]:
-            raise CaseError("catenary.definition_file: required when catenary.model = \"pfem\" (the span to model)")
-        definition = (source.parent / c["definition_file"]).resolve()
-        _analysis(source, c["definition_file"], "catenary.definition_file")  # a readable, form-findable file
-        if v["pfem"]["omega_max_rad_s"] > math.pi / dt:
-            raise CaseError(f"pfem.omega_max_rad_s: {v['pfem']['omega_max_rad_s']:g} rad/s is above the Nyquist "
-                            f"frequency pi/dt = {math.pi / dt:.1f} rad/s")
+    model = c["model"]
+    definition = (source.parent / c["definition_file"]).resolve() if c["definition_file"] else None
     case = Case(v["case"]["name"], source, v, cat, pan, rig, profile, speed, span, n, dt,
                 harmonic_count(hil["max_frequency_hz"], n, dt), hil["update"], hil["relaxation"],
                 hil["ramp_steps"], hil["delay_compensation"], delay_override, model, definition, rig_spec,
                 hil["rig_compensation"])
     _check_measured_response(case)
+    try:
+        CATENARIES.get(model, "catenary.model").check(case)
+    except CaseError:
+        raise
+    except InputError as exc:
+        raise CaseError(str(exc), key=exc.key) from None
     return case
 
 

@@ -22,6 +22,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+from pantohil.models.catenary.interface import CATENARIES
 from pantohil.models.pantograph.interface import PANTOGRAPHS
 
 AUTO = "auto"
@@ -101,8 +102,9 @@ class CaseSection:
 class CatenarySection:
     """[catenary]: the periodic catenary model (Paper A sec. 3, Paper C)."""
 
-    model: str = param("asm", "1", "catenary model: ASM2 string (Paper A) or PFEM (Paper C)",
-                       choices=("asm", "pfem"), fmu="catenary")
+    model: str = param("asm", "1", "catenary model: ASM2 string (Paper A), PFEM (Paper C), or one another "
+                                   "package registers (`pantohil.catenaries`)",
+                       choices=CATENARIES.names(), fmu="catenary")
     definition_file: str = param("", "1", "catenary file (relative to the case): ASM2 fitted to its FE model, "
                                           "or the span of the PFEM")
     span_m: float = param(REQUIRED, "m", "span length L", 1.0, 1000.0, fmu="catenary", fmu_start=65.0)
@@ -310,6 +312,27 @@ def fmu_variable_names(key: Key) -> list[str]:
     if key.param.fmu_items:
         return [f"{key.name}_{i}" for i in range(1, key.param.fmu_items + 1)]
     return [key.name]
+
+
+def fmu_values(fmu: str, values: dict, resolved: dict | None = None) -> dict:
+    """{FMU variable: value} of the case keys that reach an FMU (naming rule in the module docstring).
+    `values` is the validated case ({section: {key: value}}); `resolved` gives, by dotted key, the value in
+    use where the case's differs ("auto", or a list the model shortens)."""
+    resolved = resolved or {}
+    out = {}
+    for key in fmu_keys(fmu):
+        value = resolved.get(key.dotted, values[key.section][key.name])
+        names = fmu_variable_names(key)
+        if key.param.choices and isinstance(key.param.choices[0], str):
+            out[names[0]] = key.param.choices.index(value)
+        elif key.type is bool:
+            out[names[0]] = int(value)
+        elif key.param.fmu_items:
+            padded = list(value) + [0.0] * (len(names) - len(value))
+            out.update(zip(names, padded, strict=True))
+        else:
+            out[names[0]] = value
+    return out
 
 
 def is_finite_number(x) -> bool:

@@ -34,12 +34,11 @@ from pantohil.builder.system import (
     loop_latency_steps,
 )
 from pantohil.models.case import Case, CaseError
+from pantohil.models.catenary.interface import catenary_model
 from pantohil.models.hil.loop import ConvergenceMonitor
 from pantohil.models.progress import progress
 
 from . import checkpoint
-from .run_reference import case_dropper_positions
-from .run_reference import closed_form_reference as closed_form_reference  # re-exported (tests, callers)
 from .inprocess import ENGINES, InProcessMaster
 from .masters import MASTERS
 from .pacing import Pacer, lock_memory, set_realtime_priority, unlock_memory
@@ -232,9 +231,10 @@ def run_topology(case: Case, options: RunOptions) -> Topology:
     if rig_paced:
         topology = replace(topology, groups={**topology.groups, "/adapter": {**topology.groups["/adapter"],
                                                                              **RIG_PACED_FIELDS}})
-    if case.model == "pfem" and case.values["pfem"]["droppers"]:
+    droppers = catenary_model(case).dropper_positions_m(case)
+    if droppers:
         extra = {f"dropper_correction_{d + 1}": f"correction force of dropper {d + 1} at this step [N]"
-                 for d in range(len(case_dropper_positions(case)))}
+                 for d in range(len(droppers))}
         extra["slack_droppers"] = "droppers corrected at this step [-]"
         topology = replace(topology, groups={**topology.groups, "/catenary": {**topology.groups["/catenary"], **extra}})
     return topology
@@ -263,7 +263,7 @@ def run_case(case: Case, out_dir: Path, progress: bool = True, master_kind: str 
     topology = run_topology(case, options)
     plan = delay_plan(case, topology)  # validates before anything is written
     with (stop_on_signals() if stop is None else nullcontext(stop)) as request:
-        operators = _pfem_operators(case, options, request)  # before the run folder: a bad operator file leaves nothing
+        operators = _catenary_prepared(case, options, request)  # before the run folder: a bad file leaves nothing
         if request.requested:
             raise RunInterrupted("interrupted before the run started: nothing written")
         with claimed_run_folder(out_dir, overwrite, resume=resume is not None) as folder:
@@ -314,14 +314,13 @@ def _check_engine(options: RunOptions) -> None:
                         "case from its start; use --engine fmu)")
 
 
-def _pfem_operators(case: Case, options: RunOptions, stop: StopRequest) -> dict | None:
-    if options.system is not None or case.model != "pfem":
+def _catenary_prepared(case: Case, options: RunOptions, stop: StopRequest) -> dict | None:
+    """What the catenary model builds ahead of the FMUs (the PFEM's operators), with its summary."""
+    if options.system is not None:
         return None
-    from pantohil.builder.operators import case_operators
-
     try:
         with stop.interruptible():
-            return case_operators(case, options.progress).summary()
+            return catenary_model(case).prepare(case, options.progress)
     except KeyboardInterrupt:
         return None
 

@@ -95,7 +95,7 @@ class InProcessMaster(RecordingMaster):
         self.values = {n: _read(s, "real", self.real_outputs[n]) for n, s in self.slaves.items()}
         self._constant_ints = {n: _read(s, "integer", self.int_outputs[n]) for n, s in self.slaves.items()}
         cat = self.slaves["catenary"]
-        self._hil, self._z0, self._pfem = cat.stepped_iteration, cat.static_heights_m, cat.is_pfem
+        self._hil, self._z0 = cat.stepped_iteration, cat.static_heights_m
         self._rig, self._pan = self.slaves["rig"].stepped_rig, self.slaves["pantograph"].stepped_pantograph
         self._block_ns: list[float] = []  # wall time per step of each block
         self._check_outputs()
@@ -151,7 +151,7 @@ class InProcessMaster(RecordingMaster):
         """The dropper correction forces at each step's instant, [step, dropper]: a span visits each
         phase once, and the iteration keeps them by phase until the phase comes round again."""
         hil = self._hil
-        if not (self._pfem and hil.nd):
+        if not getattr(hil, "nd", 0):
             return np.zeros((count, 0))
         return hil.correction_at[np.arange(k0, k0 + count) % hil.n].copy()
 

@@ -7,25 +7,14 @@ from dataclasses import asdict
 
 import numpy as np
 from pantohil.models.case import Case
+from pantohil.models.catenary.interface import catenary_model
 from pantohil.models.metrics import force_statistics, lowpass_periodic, rms
 from pantohil.models.pantograph.interface import pantograph_model
 
 from . import report
-from .run_reference import case_dropper_positions, closed_form_reference
 from .run_summary import ForceStatistics, RunSummary, Timing
 
 FILTER_HZ = 20.0
-
-
-def _catenary_summary(case: Case) -> dict:
-    if case.model == "pfem":
-        p = case.values["pfem"]
-        s = case.pfem_settings()
-        return {"model": "pfem", "span_m": case.span_m, "definition_file": str(case.definition_path),
-                "droppers_slacken": p["droppers"], "dropper_relaxation": p["dropper_relaxation"],
-                "dropper_harmonics": s.n_harmonics_dropper, "omega_max_rad_s": s.omega_max,
-                "grid_resolution": s.resolution, "taper": s.taper}
-    return {"model": "asm", "span_m": case.span_m, **asdict(case.catenary)}
 
 
 def _pantograph_summary(case: Case) -> dict:
@@ -51,12 +40,16 @@ def _statistics(f: np.ndarray, filtered: np.ndarray, contact: bool) -> ForceStat
 
 
 def _reference(case: Case, f: np.ndarray):
-    """The closed form of an ASM case (Paper A eqs. 38-41) and the run's RMS distance to it."""
-    ref = closed_form_reference(case)
+    """The catenary model's reference steady force (ASM: the closed form, Paper A eqs. 38-41) and the run's
+    RMS distance to it; (None, None) if the model has none."""
+    found = catenary_model(case).reference_force(case)
+    if found is None:
+        return None, None
+    name, ref = found
     err = rms((f - f.mean()) - (ref - ref.mean()))
     f25, r25 = lowpass_periodic(f, case.dt_s, 25.0), lowpass_periodic(ref, case.dt_s, 25.0)  # Paper B sec. 5.1
     err25 = rms((f25 - f25.mean()) - (r25 - r25.mean()))
-    return ref, {"model": "asm closed form (Paper A eqs. 38-41), same harmonics", "std_N": float(np.std(ref)),
+    return ref, {"model": name, "std_N": float(np.std(ref)),
                  "rms_error_N": err, "rms_error_rel_std": err / max(float(np.std(ref)), 1e-12),
                  "rms_error_rel_std_25hz": err25 / max(float(np.std(r25)), 1e-12)}
 
@@ -77,7 +70,7 @@ def _rig_summary(case: Case) -> dict:
 def _droppers(state, start: int, stop: int, plots: bool) -> dict:
     case, master, out_dir = state.case, state.master, state.prepared.out_dir
     n, dt = case.samples_per_span, case.dt_s
-    positions = case_dropper_positions(case)
+    positions = catenary_model(case).dropper_positions_m(case)
     names = [v for v in master.real_outputs["catenary"] if v.startswith("dropper_correction_")]
     corr = np.column_stack([master.column("catenary", v, start, stop) for v in names])[:, :len(positions)]
     np.savetxt(out_dir / "dropper_corrections.csv", np.column_stack([np.arange(n) * dt, corr]), delimiter=",",
@@ -103,10 +96,10 @@ def _last_span(state, spans_done: int, plots) -> dict:
                              master.column("catenary", "height_at_sample", start, stop), f, case.speed_m_s)
     filtered = lowpass_periodic(f, dt, FILTER_HZ)
     out = {"contact_force": _statistics(f, filtered, not pantograph_model(case.pantograph).fixed_to_actuator)}
-    ref = None
-    if case.model == "asm":
-        ref, out["reference"] = _reference(case, f)
-    elif case.values["pfem"]["droppers"]:
+    ref, reference = _reference(case, f)
+    if reference is not None:
+        out["reference"] = reference
+    if catenary_model(case).dropper_positions_m(case):
         out["droppers"] = _droppers(state, start, stop, plots())
     if plots():
         overlay = [master.column("catenary", "force_at_sample", s * n, (s + 1) * n)
@@ -170,7 +163,7 @@ def summarise_run(state) -> RunSummary:
                     cpu_s=state.cpu_s)
     summary = RunSummary(
         case=case.name, master=prepared.options.master_kind, status=status, message=message, spans=spans_done,
-        samples_per_span=n, dt_s=dt, speed_kmh=case.speed_kmh, catenary=_catenary_summary(case),
+        samples_per_span=n, dt_s=dt, speed_kmh=case.speed_kmh, catenary=catenary_model(case).summary(case),
         pantograph=_pantograph_summary(case), rig=_rig_summary(case), hil=_hil_summary(case, prepared.plan),
         timing=timing, topology=prepared.topology.name, fmus=[str(p) for p in prepared.fmus.values()],
         convergence=history, stop_signal=signal_name, operators=prepared.operators, realtime=state.realtime,

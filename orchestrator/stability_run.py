@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.case import Case, CaseError, load_case
-from pantohil.models.catenary.receptance import asm_operator, harmonic_count, reduce_harmonics
+from pantohil.models.catenary.interface import catenary_model
+from pantohil.models.catenary.receptance import harmonic_count
 from pantohil.models.stability.map_point import (best_relaxation, contact_frequency_hz, problem_for,
                                                  rig_problem_for, with_contact_stiffness)
 from pantohil.models.storage import atomic_path
@@ -75,20 +76,8 @@ def parse_range(text: str | None, option: str, integer: bool = False, positive: 
 
 
 def _operator(case: Case, f_max: float):
-    """(kernel, None) for the ASM, (None, I_cc) for the PFEM: its operator reduced to f_max's harmonics."""
-    n, dt = case.samples_per_span, case.dt_s
-    nh = harmonic_count(f_max, n, dt)
-    if case.model == "asm":
-        return asm_operator(case.catenary, case.speed_m_s, n, dt, nh).kernel, None
-    from pantohil.builder.operators import case_operators
-    from pantohil.models.catenary.pfem.operator_file import load_operators
-
-    if nh > case.n_harmonics:
-        raise CaseError(f"f_max: {f_max:g} Hz needs {nh} harmonics; this PFEM case's operators keep "
-                        f"{case.n_harmonics} (raise hil.max_frequency_hz)")
-    ops = load_operators(case_operators(case, progress=False).path)
-    I_cc = np.asarray(ops.cc, dtype=float).T  # ops.cc[m] is column m: the heights per unit force at sample m
-    return None, np.apply_along_axis(reduce_harmonics, 0, I_cc, nh)  # W~ on the observed index only
+    """The catenary model's operator reduced to f_max's harmonics: (kernel, None) or (None, I_cc)."""
+    return catenary_model(case).stability_operator(case, harmonic_count(f_max, case.samples_per_span, case.dt_s))
 
 
 def stability_row(task: dict) -> list[dict]:

@@ -1,24 +1,27 @@
-"""The virtual HIL loop of an ASM case through its rig, in process, with the FMU master's semantics.
+"""The virtual HIL loop of a case through its rig, in process, with the FMU master's semantics.
 
 catenary -> rig -> pantograph -> rig -> catenary with Jacobi stepping: at step k every block gets
 the outputs of step k-1 (one step per connection, 4 in the loop), as `orchestrator.master` steps
 the three FMUs. It runs the same model classes as the FMUs, so it gives the same iteration without
-building them: for studies of rig compensation and for tests (a PFEM case on operators its caller loads).
+building them: for studies of rig compensation and for tests.
 """
 from __future__ import annotations
 
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from ..case import Case
-from ..catenary.receptance import CirculantOperator, asm_operator, reduce_harmonics
+from ..catenary.grid import SpanGrid
+from ..catenary.interface import catenary_model
+from ..parameters import fmu_values
 from ..pantograph.interface import make_pantograph
 from ..rig.chain import Rig
 from ..rig.compensation import HarmonicCompensation
 from ..rig.drive_chain import RigChain, RigSpec
-from .droppers import PfemHil
-from .loop import ConvergenceMonitor, PeriodicHil
+from .loop import ConvergenceMonitor
 
 LOOP_CONNECTIONS = 4
 
@@ -32,20 +35,15 @@ class LoopResult:
     history: list
 
 
-def case_iteration(case: Case, delay_steps: int, operators=None):
-    """The catenary FMU's iteration for an ASM case, or for a PFEM case on its `operators` (PfemOperators,
-    built by the caller), with the rig's response compensated if the case says so."""
-    n, n_h = case.samples_per_span, case.n_harmonics
-    comp = HarmonicCompensation(n, *case.rig_response()) if case.compensates_rig_response else None
-    if case.model == "pfem":
-        if operators is None:
-            raise ValueError("a PFEM case runs in process on its operators (builder.operators.case_operators)")
-        p = case.values["pfem"]
-        return PfemHil(operators, case.hil_settings(delay_steps), p["dropper_relaxation"], p["droppers"], comp)
-    op = asm_operator(case.catenary, case.speed_m_s, n, case.dt_s, n_h)
-    if comp is not None:
-        op = CirculantOperator(comp.compensate_kernel(op.kernel))
-    return PeriodicHil(op, reduce_harmonics(case.z0_samples(), n_h), case.hil_settings(delay_steps), comp)
+def case_iteration(case: Case, delay_steps: int):
+    """The catenary FMU's iteration for the case (models/catenary/interface.py: built from a staged folder as
+    the FMU builds it), with the rig's response compensated if the case says so."""
+    comp = HarmonicCompensation(case.samples_per_span, *case.rig_response()) if case.compensates_rig_response else None
+    model = catenary_model(case)
+    with tempfile.TemporaryDirectory(prefix="pantohil-catenary-") as folder:
+        model.stage(case, Path(folder), link=True)
+        return model.iteration(SpanGrid.of_case(case), fmu_values("catenary", case.values), Path(folder),
+                               case.hil_settings(delay_steps), comp)[0]
 
 
 def case_rig(case: Case, dt_s: float | None = None, spec: RigSpec | None = None):
@@ -60,15 +58,15 @@ def case_rig(case: Case, dt_s: float | None = None, spec: RigSpec | None = None)
     return Rig(case.rig, dt)
 
 
-def run_loop(case: Case, force_limit_N: float | None = None, operators=None, rig_lead_steps: int = 0) -> LoopResult:
+def run_loop(case: Case, force_limit_N: float | None = None, rig_lead_steps: int = 0) -> LoopResult:
     """Run the case's loop until the span-to-span change is below run.convergence_tol (after the ramp),
     the force leaves run.force_limit_N or its change stays above run.divergence_change (diverged, as the FMU
-    master decides), or run.max_spans (a PFEM case on its `operators`). `rig_lead_steps`: the rig started
+    master decides), or run.max_spans. `rig_lead_steps`: the rig started
     that many steps before the loop, at rest (the phase of its clocks against the span: through the adapter
     and `pantohil rig-emulator` the loop has one connection fewer and the rig runs 1 step ahead)."""
     run = case.values["run"]
     n = case.samples_per_span
-    hil = case_iteration(case, case.delay_steps(LOOP_CONNECTIONS), operators)
+    hil = case_iteration(case, case.delay_steps(LOOP_CONNECTIONS))
     rig = case_rig(case)
     pan = make_pantograph(case.pantograph, case.dt_s, case.reference_height_m())
     monitor = ConvergenceMonitor(n, case.rig_period_spans())

@@ -10,6 +10,8 @@ receives the true force at every kept harmonic; A = e^{i w D dt}, B = 1 is the d
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 
@@ -67,3 +69,23 @@ class HarmonicCompensation:
         bmat = self.force_matrix()
         flat = rows.reshape(self.n, -1)
         return (bmat.T @ flat).reshape(rows.shape)
+
+
+RESPONSE_FILE = "rig_response.csv"  # the rig's gains the catenary FMU carries in resources/
+
+
+def write_response_csv(folder: Path, height_gains: np.ndarray, force_gains: np.ndarray) -> Path:
+    """The gains at harmonics 0..N_h-1 as rig_response.csv (harmonic,height_re,height_im,force_re,force_im)."""
+    gz, gf = np.asarray(height_gains, complex), np.asarray(force_gains, complex)
+    table = np.column_stack([np.arange(len(gz)), gz.real, gz.imag, gf.real, gf.imag])
+    np.savetxt(folder / RESPONSE_FILE, table, delimiter=",", comments="", fmt="%.17g",
+               header="harmonic,height_re,height_im,force_re,force_im")
+    return folder / RESPONSE_FILE
+
+
+def read_response_csv(folder: Path, samples_per_span: int, n_harmonics: int) -> HarmonicCompensation:
+    """The compensation of a staged rig_response.csv, which must hold harmonics 0..n_harmonics-1."""
+    table = np.atleast_2d(np.loadtxt(Path(folder) / RESPONSE_FILE, delimiter=",", skiprows=1))
+    if table.shape[0] != n_harmonics or not np.array_equal(table[:, 0], np.arange(n_harmonics)):
+        raise ValueError(f"{RESPONSE_FILE} has {table.shape[0]} harmonics; the parameters keep {n_harmonics}")
+    return HarmonicCompensation(samples_per_span, table[:, 1] + 1j * table[:, 2], table[:, 3] + 1j * table[:, 4])

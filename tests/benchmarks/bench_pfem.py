@@ -34,7 +34,7 @@ def main() -> None:
     case_file = CASES / f"{args.case}.toml"
     with tempfile.TemporaryDirectory() as tmp:
         os.environ["PANTOHIL_CACHE"] = str(Path(tmp) / "cache")
-        from pantohil.builder import operators as ob
+        from pantohil.models.catenary.pfem import operator_cache as ob
         from pantohil.models.case import load_case
         from pantohil.models.catenary.pfem.operator_file import load_operators
 

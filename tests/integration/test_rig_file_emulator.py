@@ -47,13 +47,7 @@ LOOP_CASES = [
 
 def _in_process(case, rig_lead_steps: int):
     """run_loop of the case (a PFEM case on the operators its hardware run built into the cache)."""
-    operators = None
-    if case.model == "pfem":
-        from pantohil.builder.operators import case_operators
-        from pantohil.models.catenary.pfem.operator_file import load_operators
-
-        operators = load_operators(case_operators(case, progress=False).path)
-    result = run_loop(case, operators=operators, rig_lead_steps=rig_lead_steps)
+    result = run_loop(case, rig_lead_steps=rig_lead_steps)
     assert result.status == "converged"
     return result
 

@@ -12,7 +12,7 @@ from pantohil.models.case import load_case
 from pantohil.models.hil.loop import ConvergenceMonitor, HilSettings, PeriodicHil
 from pantohil.models.pantograph.interface import make_pantograph
 from pantohil.models.catenary.receptance import CirculantOperator, asm_operator, reduce_harmonics
-from pantohil.orchestrator.hil_run import closed_form_reference
+from pantohil.models.catenary.asm.model import closed_form_reference
 
 
 def run_loop(case, latency, max_spans=400, tol=1e-4, settings=None):

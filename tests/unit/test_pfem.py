@@ -148,7 +148,7 @@ def test_an_operator_file_header_claiming_a_huge_shape_is_refused_before_allocat
 
 
 def test_an_interrupted_build_leaves_no_cache_entry(tmp_path, monkeypatch):
-    from pantohil.builder import operators as ob
+    from pantohil.models.catenary.pfem import operator_cache as ob
     from pantohil.models.case import load_case
 
     monkeypatch.setenv("PANTOHIL_CACHE", str(tmp_path / "cache"))

@@ -11,6 +11,7 @@ import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 from pantohil.models.progress import progress as progress_bar
 
@@ -21,12 +22,13 @@ from pantohil.models.catenary.pfem import frf as pfem_frf
 from pantohil.models.catenary.pfem import lag_transform as pfem_lag_transform
 from pantohil.models.catenary.pfem import operator_file
 from pantohil.models.catenary.pfem import operators as pfem_operators
-from pantohil.models.case import Case
 from pantohil.models.catenary.fe.definition import load_definition
 from pantohil.models.catenary.pfem.operator_file import FORMAT_VERSION, load_operators, save_operators
 from pantohil.models.catenary.pfem.blocks import periodic_block
 from pantohil.models.catenary.pfem.operators import build_operators
 from pantohil.models.storage import cache_root
+
+Case = Any  # a validated case (models/case.py), which imports the catenary models
 
 
 SOURCES = (pfem_frf, pfem_lag_transform, pfem_blocks, pfem_operators, fe_model, catenary_definition, operator_file)
