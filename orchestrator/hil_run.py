@@ -36,6 +36,7 @@ from pantohil.builder.system import (
 from pantohil.models.case import Case, CaseError
 from pantohil.models.catenary.interface import catenary_model
 from pantohil.models.hil.loop import ConvergenceMonitor
+from pantohil.models.hil.stop_rules import StopRules
 from pantohil.models.progress import progress
 
 from . import checkpoint
@@ -145,6 +146,7 @@ class RunState:
     observers: list
     master: object = None
     monitor: ConvergenceMonitor | None = None
+    rules: StopRules | None = None  # when the run stops (models/hil/stop_rules.py)
     pacer: Pacer | None = None
     bar: object = None
     scheduling: str = "normal"
@@ -219,8 +221,7 @@ def run_topology(case: Case, options: RunOptions) -> Topology:
                         f"(not {options.master_kind}) unless it is rig-paced")
     if rig_paced and options.realtime:
         raise CaseError("--realtime: a rig-paced run goes at the rig's pace; drop --realtime")
-    run = case.values["run"]
-    duration_spans = -(-round(run["duration_s"] / case.dt_s) // case.samples_per_span)
+    run, duration_spans = case.values["run"], StopRules.of_case(case).duration_spans
     if duration_spans > run["max_spans"]:
         raise CaseError(f"run.duration_s: {run['duration_s']:g} s is {duration_spans} spans, more than "
                         f"run.max_spans = {run['max_spans']}")
@@ -414,6 +415,7 @@ def start(state: RunState) -> None:
         raise
     state.observers.insert(0, mcap)
     state.monitor = ConvergenceMonitor(case.samples_per_span, case.rig_period_spans())
+    state.rules = StopRules.of_case(case)
     if options.resume is not None:
         try:
             state.first_span = checkpoint.restore(options.resume, state.master, state.monitor)
@@ -483,37 +485,33 @@ def step_until_done(state: RunState) -> None:
 
 
 def _limits(state: RunState):
-    master, run = state.master, state.case.values["run"]
+    """Where the force in use, the height command and (on a rig) the link state are among the outputs."""
+    master = state.master
     cat = master.real_outputs["catenary"]
     link_col = (master.int_outputs["adapter"].index("link_state") if state.prepared.options.hardware is not None
                 else None)
-    limits = run["force_limit_N"], run["height_limit_m"]
-    return cat.index("force_at_sample"), cat.index("height_command"), *limits, link_col
+    return cat.index("force_at_sample"), cat.index("height_command"), link_col
 
 
-def _diverged(master, span: int, i_f: int, i_z: int, dt: float) -> _Stop:
-    out = master.values["catenary"]
-    return _diverged_at(master.k * dt, span, out[i_f], out[i_z])
-
-
-def _diverged_at(t_s: float, span: int, force_N: float, height_m: float) -> _Stop:
-    return _Stop("diverged", f"diverged at t = {t_s:.3f} s (span {span}): force {force_N:.4g} N, "
-                             f"height {height_m:.4g} m beyond run.force_limit_N / run.height_limit_m")
+def _diverged_at(state: RunState, k: int, span: int, force_N: float, height_m: float) -> _Stop:
+    """The stop after step k (from 1) whose force or height is beyond the limits."""
+    return _Stop("diverged", state.rules.diverged_message(k * state.case.dt_s, span, force_N, height_m))
 
 
 def _steps(state: RunState, span: int) -> str | None:
     """The steps of one span; "interrupted" if a stop was requested before one of them. The limits and
     the link are checked after every `master.steps_per_check` steps (1 but for libcosim, which is read
     back a block of steps at a time)."""
-    master, pacer, stop, dt = state.master, state.pacer, state.stop, state.case.dt_s
+    master, pacer, stop = state.master, state.pacer, state.stop
     limits = _limits(state)
-    i_f, i_z, f_lim, z_lim, _ = limits
+    i_f, i_z, _ = limits
     step_observers = [o for o in state.observers if o.wants_steps]
     end = (span + 1) * state.case.samples_per_span
     if pacer is None and not step_observers and master.steps_a_span_at_once:  # the in-process engine
-        outcome = master.run_steps(end - master.k, stop, f_lim, z_lim)
+        outcome = master.run_steps(end - master.k, stop, state.rules.force_limit_N, state.rules.height_limit_m)
         if outcome == "diverged":
-            raise _diverged(master, span, i_f, i_z, dt)
+            out = master.values["catenary"]
+            raise _diverged_at(state, master.k, span, out[i_f], out[i_z])
         return outcome
     block = 1 if step_observers else master.steps_per_check
     while master.k < end:
@@ -537,21 +535,20 @@ def _steps(state: RunState, span: int) -> str | None:
 def _check_steps(state: RunState, span: int, k0: int, k1: int, limits: tuple) -> None:
     """Stop the run if a step of k0..k1-1 left run.force_limit_N or run.height_limit_m (or went NaN), or
     the link is in fault after it."""
-    master, dt = state.master, state.case.dt_s
-    i_f, i_z, f_lim, z_lim, link_col = limits
+    master, dt, rules = state.master, state.case.dt_s, state.rules
+    i_f, i_z, link_col = limits
     if k1 - k0 == 1:  # one step (the common case of the fmpy master): no arrays
         out = master.values["catenary"]
-        if not (abs(out[i_f]) <= f_lim and abs(out[i_z]) <= z_lim):  # also catches NaN
-            raise _diverged_at(k1 * dt, span, out[i_f], out[i_z])
+        if rules.beyond(out[i_f], out[i_z]):
+            raise _diverged_at(state, k1, span, out[i_f], out[i_z])
         fault = link_col is not None and master.int_value("adapter", "link_state", k0) == LINK_FAULT
         k = k0
     else:
         force = master.column("catenary", "force_at_sample", k0, k1)
         height = master.column("catenary", "height_command", k0, k1)
-        bad = ~((np.abs(force) <= f_lim) & (np.abs(height) <= z_lim))  # also catches NaN
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise _diverged_at((k0 + i + 1) * dt, span, force[i], height[i])
+        i = rules.first_beyond(force, height)
+        if i is not None:
+            raise _diverged_at(state, k0 + i + 1, span, force[i], height[i])
         faults = master.column("adapter", "link_state", k0, k1) == LINK_FAULT if link_col is not None else None
         fault = faults is not None and bool(faults.any())
         k = k0 + int(np.argmax(faults)) if fault else k0
@@ -565,7 +562,7 @@ def _check_steps(state: RunState, span: int, k0: int, k1: int, limits: tuple) ->
 
 def step_span(state: RunState, span: int) -> tuple[str, str] | None:
     """One span of steps, then its convergence record; (status, message) if the run ends with it."""
-    case, master, run = state.case, state.master, state.case.values["run"]
+    case, master = state.case, state.master
     n, dt = case.samples_per_span, case.dt_s
     if _steps(state, span) == "interrupted":
         return "interrupted", f"interrupted at t = {master.k * dt:.3f} s ({state.stop.signal_name}), in span {span}"
@@ -582,28 +579,13 @@ def step_span(state: RunState, span: int) -> tuple[str, str] | None:
     state.bar.set_postfix(change=f"{rec['change']:.2e}", mean=f"{rec['mean_N']:.1f}", std=f"{rec['std_N']:.2f}")
     fmu, output = state.topology.contact_force
     if not master.column(fmu, output, start, start + n).any():
-        return "contact_lost", (f"contact lost: the contact force was 0 N for the whole span {span} "
-                                f"(t = {start * dt:.3f}-{(start + n) * dt:.3f} s)")
+        return state.rules.after_span(span, rec, state.monitor, contact=False)
     if measured is not None:
         data_failed = _data_failed(state, span, rec["measured"])
         if data_failed is not None:
             return "link_lost", data_failed
-    settled = (start >= case.ramp_steps and span >= 2 and rec["change"] <= run["convergence_tol"]
-               and (measured is None or _link_ok_at(state, start + n - 1)))
-    duration_spans = -(-round(run["duration_s"] / dt) // n)
-    if duration_spans and span + 1 >= duration_spans:
-        return (("converged", f"converged; ran {span + 1} spans (run.duration_s)") if settled else
-                ("completed", f"completed the planned run.duration_s = {run['duration_s']:g} s ({span + 1} spans); "
-                              f"not converged: the last span's change {rec['change']:.3g} is above "
-                              f"run.convergence_tol = {run['convergence_tol']:g}"))
-    if settled and not duration_spans:
-        return "converged", f"converged after {span + 1} spans"
-    median = state.monitor.diverging(run["divergence_spans"], run["divergence_change"], -(-case.ramp_steps // n) + 1)
-    if median is not None:
-        return "diverged", (f"diverged at span {span}: the span-to-span change stayed at {median:.2f} of the std "
-                            f"(median of {run['divergence_spans']} spans, run.divergence_change "
-                            f"{run['divergence_change']:g})")
-    return None
+    return state.rules.after_span(span, rec, state.monitor, contact=True,
+                                  answered=measured is None or _link_ok_at(state, start + n - 1))
 
 
 def _measured(state: RunState, start: int, stop: int) -> np.ndarray | None:

@@ -8,7 +8,7 @@ building them: for studies of rig compensation and for tests.
 from __future__ import annotations
 
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +22,7 @@ from ..rig.chain import Rig
 from ..rig.compensation import HarmonicCompensation
 from ..rig.drive_chain import RigChain, RigSpec
 from .loop import ConvergenceMonitor
+from .stop_rules import StopRules
 
 LOOP_CONNECTIONS = 4
 
@@ -29,7 +30,7 @@ LOOP_CONNECTIONS = 4
 @dataclass
 class LoopResult:
     """Outcome of a loop run in process: status, spans, the last span's force [N] and the convergence history."""
-    status: str  # "converged", "diverged" or "span_limit"
+    status: str  # as a run's: "converged", "completed", "diverged", "contact_lost" or "span_limit"
     spans: int
     force_N: np.ndarray  # the force the catenary uses over the last span (f_N of steady_span.csv)
     history: list
@@ -59,39 +60,37 @@ def case_rig(case: Case, dt_s: float | None = None, spec: RigSpec | None = None)
 
 
 def run_loop(case: Case, force_limit_N: float | None = None, rig_lead_steps: int = 0) -> LoopResult:
-    """Run the case's loop until the span-to-span change is below run.convergence_tol (after the ramp),
-    the force leaves run.force_limit_N or its change stays above run.divergence_change (diverged, as the FMU
-    master decides), or run.max_spans. `rig_lead_steps`: the rig started
+    """Run the case's loop until it stops by the rules every run follows (models/hil/stop_rules.py: the
+    limits after each step, contact loss, convergence, a planned length or a lasting change after each
+    span), or run.max_spans; `force_limit_N` replaces run.force_limit_N. `rig_lead_steps`: the rig started
     that many steps before the loop, at rest (the phase of its clocks against the span: through the adapter
     and `pantohil rig-emulator` the loop has one connection fewer and the rig runs 1 step ahead)."""
-    run = case.values["run"]
     n = case.samples_per_span
+    rules = StopRules.of_case(case)
+    if force_limit_N is not None:
+        rules = replace(rules, force_limit_N=force_limit_N)
     hil = case_iteration(case, case.delay_steps(LOOP_CONNECTIONS))
     rig = case_rig(case)
     pan = make_pantograph(case.pantograph, case.dt_s, case.reference_height_m())
     monitor = ConvergenceMonitor(n, case.rig_period_spans())
-    limit = force_limit_N or run["force_limit_N"]
     cmd, act, meas, f = 0.0, 0.0, 0.0, pan.settle(0.0)
     for _ in range(rig_lead_steps):
         rig.step(0.0, f)
     status, span = "span_limit", 0
     used = np.zeros(n)
-    for span in range(run["max_spans"]):
+    for span in range(case.values["run"]["max_spans"]):
+        contact = False
         for i in range(n):
             cmd_new = hil.step(meas)
             used[i] = hil.force_estimate[i]
             act_new, meas_new = rig.step(cmd, f)
             f = pan.step(act)
             cmd, act, meas = cmd_new, act_new, meas_new
-        if not np.all(np.abs(used) <= limit):
-            status = "diverged"
-            break
-        rec = monitor.close_span(span, used)
-        if (span + 1) * n >= case.ramp_steps and rec["change"] <= run["convergence_tol"]:
-            status = "converged"
-            break
-        first = -(-case.ramp_steps // n) + 1  # the FMU master's test: a limit cycle that contact loss bounds
-        if monitor.diverging(run["divergence_spans"], run["divergence_change"], first) is not None:
-            status = "diverged"
+            contact = contact or f != 0.0
+            if rules.beyond(used[i], cmd):
+                return LoopResult("diverged", span, used.copy(), monitor.history)
+        outcome = rules.after_span(span, monitor.close_span(span, used), monitor, contact)
+        if outcome is not None:
+            status = outcome[0]
             break
     return LoopResult(status, span + 1, used.copy(), monitor.history)
