@@ -57,7 +57,7 @@ def fmu_parameters(case: Case, delay_steps: int,
         "pantograph": {"n_masses": pan.n, "reference_height": case.reference_height_m(), "time_step": case.dt_s},
         "rig": {"time_step": case.dt_s, "rig_chain": int(case.rig_spec is not None)},
         "adapter": {"rig_host": rig_address[0], "rig_port": rig_address[1], "time_step": case.dt_s,
-                    "local_host": case.values["link"]["local_host"], "key_file": case.values["link"]["key_file"],
+                    "local_host": case.sections.link.local_host, "key_file": case.sections.link.key_file,
                     "horizon_steps": case.horizon_steps},
     }
     return {name: {**fmu_values(name, case.values, resolved), **extra} for name, extra in derived.items()}

@@ -6,6 +6,7 @@ key, a value out of range or an inconsistent combination raises CaseError with o
 from __future__ import annotations
 
 import copy
+import functools
 import dataclasses
 import math
 import re
@@ -32,6 +33,7 @@ from pantohil.models.parameters import (
     SECTIONS,
     XS_INT_MAX,
     XS_INT_MIN,
+    CaseSections,
     Key,
     section_keys,
 )
@@ -219,6 +221,11 @@ class Case:
     rig_compensation: str = "delay"
     overrides: tuple = ()  # the `section.key=value` overrides given on top of the case file
 
+    @functools.cached_property
+    def sections(self) -> CaseSections:
+        """The validated case as its typed sections: `case.sections.run.max_spans`."""
+        return CaseSections.of(self.values)
+
     @property
     def title(self) -> str:
         """The case's name with its overrides, for plot titles: `asm_250 [hil.update=span]`."""
@@ -255,10 +262,10 @@ class Case:
         """The discretisation of this case's PFEM operators (Paper C sec. 3, Paper D sec. 3.5/3.7)."""
         from pantohil.models.catenary.pfem.operators import PfemSettings
 
-        p = self.values["pfem"]
+        p = self.sections.pfem
         return PfemSettings(self.speed_m_s, self.dt_s, self.samples_per_span, self.n_harmonics,
-                            harmonic_count(p["dropper_max_frequency_hz"], self.samples_per_span, self.dt_s),
-                            p["omega_max_rad_s"], "graded", p["grid_resolution"], taper=p["taper"])
+                            harmonic_count(p.dropper_max_frequency_hz, self.samples_per_span, self.dt_s),
+                            p.omega_max_rad_s, "graded", p.grid_resolution, taper=p.taper)
 
     @property
     def speed_kmh(self) -> float:
@@ -288,13 +295,13 @@ class Case:
     @property
     def hold_steps(self) -> int:
         """The extra loop delay E of hil.hold_steps [steps] (Paper D sec. 4)."""
-        return int(self.values["hil"].get("hold_steps", 0))
+        return int(self.sections.hil.hold_steps)
 
     @property
     def horizon_steps(self) -> int:
         """H of link.horizon_steps: the heights each answer carries for the rig's next ticks; "auto": the
         steps of HORIZON_AUTO_S, at most MAX_HORIZON_STEPS (docs/udp-protocol.md)."""
-        value = self.values["link"]["horizon_steps"]
+        value = self.sections.link.horizon_steps
         if value == AUTO:
             return min(MAX_HORIZON_STEPS, math.ceil(HORIZON_AUTO_S / self.dt_s - 1e-9))
         return int(value)

@@ -272,6 +272,28 @@ SECTIONS: dict[str, type] = {
 
 
 @dataclass(frozen=True)
+class CaseSections:
+    """A validated case as its typed sections, one frozen dataclass per [section] (lists as tuples)."""
+
+    case: CaseSection
+    catenary: CatenarySection
+    profile: ProfileSection
+    pantograph: PantographSection
+    rig: RigSection
+    link: LinkSection
+    actuator: ActuatorSection
+    hil: HilSection
+    pfem: PfemSection
+    run: RunSection
+
+    @classmethod
+    def of(cls, values: dict) -> CaseSections:
+        """The sections of validated values ({section: {key: value}}, every key present)."""
+        return cls(**{name: SECTIONS[name](**{key: tuple(v) if isinstance(v, list) else v
+                                              for key, v in values[name].items()}) for name in SECTIONS})
+
+
+@dataclass(frozen=True)
 class Key:
     """One declared case key: section, name, Python type, default and its Param."""
 

@@ -390,11 +390,11 @@ def _hardware_endpoint(text: str | None) -> tuple[str, int] | None:
 
 def _check_key_file(case) -> None:
     """link.key_file, read once before anything is written: one line if it is not a usable key."""
-    if case.values["link"]["key_file"]:
+    if case.sections.link.key_file:
         from pantohil.fmus.udp_protocol import read_key
 
         try:
-            read_key(case.values["link"]["key_file"])
+            read_key(case.sections.link.key_file)
         except ValueError as exc:
             raise CaseError(f"link.key_file: {exc}") from None
 

@@ -39,9 +39,9 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
     before the simulation (new or empty; `overwrite` replaces it whole) and appears complete or not at all.
     """
     spans = central_spans(n_spans, central)
-    if not case.values["catenary"]["definition_file"]:
+    if not case.sections.catenary.definition_file:
         raise CaseError("catenary.definition_file: the case's catenary has no catenary file to build a section from")
-    path = (case.source.parent / case.values["catenary"]["definition_file"]).resolve()
+    path = (case.source.parent / case.sections.catenary.definition_file).resolve()
     cat = load_definition(path)
     from pantohil.models.catenary.fe.simulation import FE_PANTOGRAPHS
 
@@ -66,13 +66,13 @@ def _simulate(case: Case, cat, n_spans: int, progress: bool):
             bar.refresh()
 
         return simulate_section(cat, case.pantograph, n_spans, case.speed_m_s, case.dt_s,
-                                case.values["pfem"]["droppers"], progress=tick,
+                                case.sections.pfem.droppers, progress=tick,
                                 reference_height_m=case.reference_height_m())
 
 
 def _write_section(out_dir: Path, case: Case, cat, path: Path, n_spans: int, spans: list[int], res) -> dict:
     """The run folder of a simulated section: tables, run.mcap, plots, and summary.json last."""
-    n, dt, slacken = case.samples_per_span, case.dt_s, case.values["pfem"]["droppers"]
+    n, dt, slacken = case.samples_per_span, case.dt_s, case.sections.pfem.droppers
     filtered = lowpass(res.force_N, dt)
     # sample m of span j is the instant t = (j n + m) dt; result row k is at t = (k + 1) dt
     sel = np.concatenate([np.arange(j * n - 1, (j + 1) * n - 1) for j in spans])

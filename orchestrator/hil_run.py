@@ -180,7 +180,7 @@ class RunState:
 
 def is_rig_paced(case: Case, options: RunOptions) -> bool:
     """Whether the run goes through the adapter with the rig owning the clock (link.paced_by = "rig")."""
-    return options.hardware is not None and case.values["link"]["paced_by"] == "rig"
+    return options.hardware is not None and case.sections.link.paced_by == "rig"
 
 
 def delay_plan(case: Case, topology: Topology = VIRTUAL) -> dict:
@@ -188,7 +188,7 @@ def delay_plan(case: Case, topology: Topology = VIRTUAL) -> dict:
     (Paper D sec. 3.4: the advance that makes the converged result independent of the loop latency)."""
     loop = loop_latency_steps(topology.connections)
     if topology.name == HARDWARE.name:
-        loop += case.values["link"]["pipeline_steps"]
+        loop += case.sections.link.pipeline_steps
     d = case.delay_steps(loop)
     if d >= case.samples_per_span:
         raise CaseError(_delay_refusal(case, loop, d, topology.name == HARDWARE.name))
@@ -221,10 +221,10 @@ def run_topology(case: Case, options: RunOptions) -> Topology:
                         f"(not {options.master_kind}) unless it is rig-paced")
     if rig_paced and options.realtime:
         raise CaseError("--realtime: a rig-paced run goes at the rig's pace; drop --realtime")
-    run, duration_spans = case.values["run"], StopRules.of_case(case).duration_spans
-    if duration_spans > run["max_spans"]:
-        raise CaseError(f"run.duration_s: {run['duration_s']:g} s is {duration_spans} spans, more than "
-                        f"run.max_spans = {run['max_spans']}")
+    run, duration_spans = case.sections.run, StopRules.of_case(case).duration_spans
+    if duration_spans > run.max_spans:
+        raise CaseError(f"run.duration_s: {run.duration_s:g} s is {duration_spans} spans, more than "
+                        f"run.max_spans = {run.max_spans}")
     topology = HARDWARE if options.hardware is not None else VIRTUAL
     if options.hardware is not None:  # only the horizon's H - 1 heights are connected (and read each step)
         ahead = set(HORIZON_OUTPUTS[case.horizon_steps - 1:])
@@ -403,7 +403,7 @@ def start(state: RunState) -> None:
                                 "duration_us": "wall time of the step [us]"}} if options.realtime else {}
     state.logged_groups = prepared.topology.groups | pacing_group
     mcap = _recorder(prepared, state.logged_groups)
-    capacity = min(case.values["run"]["max_spans"], RECORDED_SPANS) * case.samples_per_span  # bounded rings
+    capacity = min(case.sections.run.max_spans, RECORDED_SPANS) * case.samples_per_span  # bounded rings
     try:
         if options.engine == "inprocess":
             state.master = InProcessMaster(case, prepared.connections, prepared.parameters, case.dt_s, capacity)
@@ -425,7 +425,7 @@ def start(state: RunState) -> None:
             with suppress(OSError):  # the new log of a resume that did not start holds nothing
                 (prepared.out_dir / _log_name(options)).unlink()
             raise
-    paced_steps = case.values["run"]["max_spans"] * case.samples_per_span
+    paced_steps = case.sections.run.max_spans * case.samples_per_span
     state.pacer = Pacer(case.dt_s, paced_steps) if options.realtime else None
     state.master.pacer = state.pacer
     # a rig-paced master sleeps on the rig's samples, so it may take the real-time priority too
@@ -433,7 +433,7 @@ def start(state: RunState) -> None:
     state.scheduling = set_realtime_priority(options.rt_priority) if paced else "normal"
     state.answer_us = Percentiles() if state.rig_paced else None
     state.status = "span_limit"
-    state.message = f"not converged within run.max_spans = {case.values['run']['max_spans']} spans"
+    state.message = f"not converged within run.max_spans = {case.sections.run.max_spans} spans"
     try:
         for observer in state.observers:
             observer.on_start(state)
@@ -455,7 +455,7 @@ def step_until_done(state: RunState) -> None:
     """Stage 3: span after span until converged, diverged, contact lost, the span limit, or a stop."""
     case = state.case
     hardware = state.prepared.options.hardware
-    state.bar = progress(case.values["run"]["max_spans"], case.name, "span", state.prepared.options.progress,
+    state.bar = progress(case.sections.run.max_spans, case.name, "span", state.prepared.options.progress,
                          initial=state.first_span)
     t_start, cpu_start = time.perf_counter(), time.process_time()
     try:
@@ -468,7 +468,7 @@ def step_until_done(state: RunState) -> None:
             gc.freeze()  # what exists now is never scanned again
             gc.disable()
             state.scheduling = f"{state.scheduling}, {lock_memory()}"
-        for span in range(state.first_span, case.values["run"]["max_spans"]):
+        for span in range(state.first_span, case.sections.run.max_spans):
             outcome = step_span(state, span)
             if outcome is not None:
                 state.status, state.message = outcome
@@ -598,7 +598,7 @@ def _measured(state: RunState, start: int, stop: int) -> np.ndarray | None:
 
 def _data_failed(state: RunState, span: int, measured: int) -> str | None:
     """Why a span with too few measured forces ends the run (link.min_measured_fraction), or None."""
-    n, share = state.case.samples_per_span, state.case.values["link"]["min_measured_fraction"]
+    n, share = state.case.samples_per_span, state.case.sections.link.min_measured_fraction
     if measured >= share * n:
         return None
     return (f"the rig's data failed: only {measured} of the {n} forces of span {span} were measured "
@@ -656,7 +656,7 @@ def _link_summary(state: RunState) -> dict:
     last = max(master.k - 1, 0)
     counters = LINK_COUNTERS + (RIG_PACED_COUNTERS if state.rig_paced else ())
     link = {c: master.int_value("adapter", c, last) for c in counters}
-    link["paced_by"] = state.case.values["link"]["paced_by"]
+    link["paced_by"] = state.case.sections.link.paced_by
     if state.rig_paced:
         link["scheduling"] = state.scheduling
         link["answer_us"] = {q: state.answer_us.summary()[q] for q in ("p50", "p99", "max")}
@@ -666,11 +666,11 @@ def _link_summary(state: RunState) -> dict:
 
 
 def _link_fault_reason(case: Case, rig_paced: bool) -> str:
-    link = case.values["link"]
+    link = case.sections.link
     if rig_paced:
-        return (f"no sample from the rig for link.sample_timeout_s = {link['sample_timeout_s']:g} s, or more than "
-                f"{link['tolerated_losses']} consecutive samples missing")
-    return f"more than {link['tolerated_losses']} consecutive answers missing"
+        return (f"no sample from the rig for link.sample_timeout_s = {link.sample_timeout_s:g} s, or more than "
+                f"{link.tolerated_losses} consecutive samples missing")
+    return f"more than {link.tolerated_losses} consecutive answers missing"
 
 
 def _session_refused(refusal: int, hardware: tuple) -> str:

@@ -31,7 +31,7 @@ def make_ssp(case: Case, fmus: dict[str, Path], path: Path, overrides: list[str]
     if overrides:  # an SSP carries the case as run, overrides included
         text += "\n# overrides given on the command line:\n" + "".join(f"# --set {o}\n" for o in overrides)
     n = case.samples_per_span
-    return write_ssp(path, case.name, fmus, params, text, case.values["run"]["max_spans"] * n * case.dt_s, case.dt_s,
+    return write_ssp(path, case.name, fmus, params, text, case.sections.run.max_spans * n * case.dt_s, case.dt_s,
                      f"pantohil HIL system of case {case.name}: catenary -> rig -> pantograph -> rig -> catenary")
 
 
@@ -41,7 +41,7 @@ def make_package(case: Case, out_dir: Path, overrides: list[str], progress: bool
     A reference run of the case, its FMUs, SSP and OSP files, a standalone fmpy runner, requirements and
     a README with the case's numbers; built in a staging folder and renamed into place.
     """
-    if case.values["profile"]["source"] == "csv":
+    if case.sections.profile.source == "csv":
         raise CaseError("profile.source: a package cannot yet carry a CSV profile; use a dropper profile")
     out_dir = check_output_folder(out_dir, "--out")  # new or empty; not a file, not under one
     out_dir.parent.mkdir(parents=True, exist_ok=True)

@@ -99,8 +99,8 @@ def identify(req: IdentifyRequest, announce=print) -> dict:
              f"after {exc.settle_spans} settling ({exc.total_steps} steps), mass {case.pantograph.masses_kg[0]:g} kg")
     uncovered = 0
     if req.hardware is None:
-        r = case.values["rig"]
-        measured = identify_chain(base, exc, case.pantograph, r["force_offset_N"], r["noise_std_N"], r["noise_seed"])
+        r = case.sections.rig
+        measured = identify_chain(base, exc, case.pantograph, r.force_offset_N, r.noise_std_N, r.noise_seed)
     else:
         measured, uncovered = _identify_hardware(case, req.hardware, exc, req.rt_priority)
         if uncovered:
@@ -149,8 +149,8 @@ def _identify_hardware(case: Case, hardware: tuple, exc: Excitation,
     held an old height) disturbs the record: the excitation (periodic after the settling spans) goes on for up to 3 more
     records until a window of whole spans has none, else the window with the fewest is taken if they are
     at most MAX_UNCOVERED of its ticks (an uncovered tick matters only where the drive takes a reference)."""
-    rig_paced = case.values["link"]["paced_by"] == "rig"
-    shift = 1 if rig_paced else int(case.values["link"]["pipeline_steps"])
+    rig_paced = case.sections.link.paced_by == "rig"
+    shift = 1 if rig_paced else int(case.sections.link.pipeline_steps)
     n, length = exc.samples_per_span, exc.record.stop - exc.record.start
     window = CleanWindow(exc.record.start, length, 2 * n, shift)  # margin: the motion profile settles in 2 spans
     heights = exc.heights(exc.total_steps + (3 * length if rig_paced else 0))
@@ -191,9 +191,9 @@ def _adapter_rows(case: Case, hardware: tuple, heights: np.ndarray, extra: int, 
 
     fmu = build_case_fmus(case, tmp / "fmus", 0, ("adapter",), hardware)["adapter"]
     inst = FmuInstance("adapter", fmu)
-    link = case.values["link"]
+    link = case.sections.link
     # lockstep: nothing paces the excitation and the record needs every answer, so each is waited for
-    patient = {} if link["paced_by"] == "rig" else {"receive_timeout_s": max(link["receive_timeout_s"],
+    patient = {} if link.paced_by == "rig" else {"receive_timeout_s": max(link.receive_timeout_s,
                                                                               LOCKSTEP_ANSWER_WAIT_S)}
     try:
         inst.setup(0.0, patient)  # the excitation starts at 0, the adapter's starting height

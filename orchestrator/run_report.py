@@ -26,7 +26,7 @@ def _pantograph_summary(case: Case) -> dict:
 
 def _hil_summary(case: Case, plan: dict) -> dict:
     return {"update": case.hil_update, "relaxation": case.relaxation,
-            "max_frequency_hz": case.values["hil"]["max_frequency_hz"], "harmonics": case.n_harmonics,
+            "max_frequency_hz": case.sections.hil.max_frequency_hz, "harmonics": case.n_harmonics,
             "ramp_steps": case.ramp_steps, "delay_compensation": case.delay_compensation, **plan}
 
 
@@ -61,10 +61,10 @@ def _rig_summary(case: Case) -> dict:
     from pantohil.models.rig.drive_chain import group_delay_s
     from pantohil.models.rig.rig_file import rig_sections
 
-    r = case.values["rig"]
-    return {"file": str((case.source.parent / r["file"]).resolve()), "name": case.rig_spec.name,
+    r = case.sections.rig
+    return {"file": str((case.source.parent / r.file).resolve()), "name": case.rig_spec.name,
             "chain": rig_sections(case.rig_spec), "group_delay_s": group_delay_s(case.rig_spec, case.dt_s),
-            "force_offset_N": r["force_offset_N"], "noise_std_N": r["noise_std_N"], "noise_seed": r["noise_seed"]}
+            "force_offset_N": r.force_offset_N, "noise_std_N": r.noise_std_N, "noise_seed": r.noise_seed}
 
 
 def _droppers(state, start: int, stop: int, plots: bool) -> dict:
@@ -132,7 +132,7 @@ def _reported_span(state, spans_done: int) -> int | None:
     history = state.monitor.history if state.monitor is not None else []
     if state.prepared.options.hardware is None or not history:
         return spans_done - 1
-    n, share = state.case.samples_per_span, state.case.values["link"]["min_measured_fraction"]
+    n, share = state.case.samples_per_span, state.case.sections.link.min_measured_fraction
     whole = [h["span"] for h in history if h.get("measured", n) >= share * n and h["span"] < spans_done]
     oldest = (state.master.k - state.master.capacity) // n if state.master is not None else 0
     return whole[-1] if whole and whole[-1] >= max(oldest, 0) else None
@@ -153,7 +153,7 @@ def summarise_run(state) -> RunSummary:
     sections = _last_span(state, reported + 1, plots) if reported is not None else {}
     history = state.monitor.history if state.monitor is not None else []
     if history and plots():
-        report.plot_convergence(prepared.out_dir / "convergence.png", history, case.values["run"]["convergence_tol"],
+        report.plot_convergence(prepared.out_dir / "convergence.png", history, case.sections.run.convergence_tol,
                                 f"{case.title}: {case.hil_update}-by-{case.hil_update} updating, "
                                 f"mu_c = {case.relaxation}")
     status, message, signal_name = _final_status(state)

@@ -108,7 +108,7 @@ def stability_row(task: dict) -> list[dict]:
 def _frequency_and_stiffness_axes(case: Case, f_max_hz: np.ndarray | None,
                                   contact_stiffness_N_m: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """The f_max and contact-stiffness axes of the map (the case's values if not given), checked positive."""
-    f_values = np.array([case.values["hil"]["max_frequency_hz"]] if f_max_hz is None else f_max_hz, dtype=float)
+    f_values = np.array([case.sections.hil.max_frequency_hz] if f_max_hz is None else f_max_hz, dtype=float)
     k_values = np.array([case.pantograph.contact_stiffness_N_m] if contact_stiffness_N_m is None
                         else contact_stiffness_N_m, dtype=float)
     if np.any(f_values <= 0):

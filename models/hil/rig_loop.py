@@ -51,11 +51,11 @@ def case_rig(case: Case, dt_s: float | None = None, spec: RigSpec | None = None)
     """The rig of a case at dt_s (default the case's): the chain of `spec` or else of the case's rig file
     (Paper B sec. 4, Paper D sec. 2), with the case's force offset and noise; else the [rig] section's Rig.
     The in-process loop and `pantohil rig-emulator` both take their rig from here."""
-    r = case.values["rig"]
+    r = case.sections.rig
     dt = case.dt_s if dt_s is None else dt_s
     spec = case.rig_spec if spec is None else spec
     if spec is not None:
-        return RigChain(spec, dt, 0.0, 0.0, r["force_offset_N"], r["noise_std_N"], r["noise_seed"])
+        return RigChain(spec, dt, 0.0, 0.0, r.force_offset_N, r.noise_std_N, r.noise_seed)
     return Rig(case.rig, dt)
 
 
@@ -78,7 +78,7 @@ def run_loop(case: Case, force_limit_N: float | None = None, rig_lead_steps: int
         rig.step(0.0, f)
     status, span = "span_limit", 0
     used = np.zeros(n)
-    for span in range(case.values["run"]["max_spans"]):
+    for span in range(case.sections.run.max_spans):
         contact = False
         for i in range(n):
             cmd_new = hil.step(meas)

@@ -39,10 +39,10 @@ class StopRules:
     @classmethod
     def of_case(cls, case) -> StopRules:
         """The rules of a case (models/case.py `Case`)."""
-        run = case.values["run"]
+        run = case.sections.run
         n, dt = case.samples_per_span, case.dt_s
-        return cls(n, dt, case.ramp_steps, run["convergence_tol"], run["force_limit_N"], run["height_limit_m"],
-                   run["divergence_change"], run["divergence_spans"], run["duration_s"])
+        return cls(n, dt, case.ramp_steps, run.convergence_tol, run.force_limit_N, run.height_limit_m,
+                   run.divergence_change, run.divergence_spans, run.duration_s)
 
     def first_beyond(self, force_N: np.ndarray, height_m: np.ndarray) -> int | None:
         """Index of the first step whose force in use or height command is beyond the limits (or NaN)."""

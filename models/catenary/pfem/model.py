@@ -25,7 +25,7 @@ class PfemModel:
         from pantohil.models.catenary.fe.analysis import cached_analysis
         from pantohil.models.catenary.fe.definition import CatenaryError
 
-        p = case.values["pfem"]
+        p = case.sections.pfem
         if case.definition_path is None:
             raise InputError("catenary.definition_file: required when catenary.model = \"pfem\" (the span to model)",
                              key="catenary.definition_file")
@@ -33,8 +33,8 @@ class PfemModel:
             cached_analysis(case.definition_path)
         except CatenaryError as exc:
             raise InputError(f"catenary.definition_file: {exc}", key="catenary.definition_file") from None
-        if p["omega_max_rad_s"] > math.pi / case.dt_s:
-            raise InputError(f"pfem.omega_max_rad_s: {p['omega_max_rad_s']:g} rad/s is above the Nyquist frequency "
+        if p.omega_max_rad_s > math.pi / case.dt_s:
+            raise InputError(f"pfem.omega_max_rad_s: {p.omega_max_rad_s:g} rad/s is above the Nyquist frequency "
                              f"pi/dt = {math.pi / case.dt_s:.1f} rad/s", key="pfem.omega_max_rad_s")
 
     def prepare(self, case, progress: bool) -> dict | None:
@@ -101,9 +101,9 @@ class PfemModel:
 
     def summary(self, case) -> dict:
         """The catenary file and the discretisation of its operators."""
-        p, s = case.values["pfem"], case.pfem_settings()
+        p, s = case.sections.pfem, case.pfem_settings()
         return {"model": case.model, "span_m": case.span_m, "definition_file": str(case.definition_path),
-                "droppers_slacken": p["droppers"], "dropper_relaxation": p["dropper_relaxation"],
+                "droppers_slacken": p.droppers, "dropper_relaxation": p.dropper_relaxation,
                 "dropper_harmonics": s.n_harmonics_dropper, "omega_max_rad_s": s.omega_max,
                 "grid_resolution": s.resolution, "taper": s.taper}
 
@@ -111,7 +111,7 @@ class PfemModel:
         """The catenary file's dropper positions within the span, if they slacken."""
         from pantohil.models.catenary.fe.definition import load_definition
 
-        if not case.values["pfem"]["droppers"]:
+        if not case.sections.pfem.droppers:
             return []
         return [float(x) for x in load_definition(case.definition_path).dropper_positions_m]
 
