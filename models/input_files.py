@@ -134,12 +134,6 @@ def first_problem(document) -> tuple[str, str] | None:
     return None
 
 
-def first_non_finite(value, where: str = "") -> str | None:
-    """The dotted key (with [i] for list items) of the first NaN or infinite number, or None."""
-    found = first_problem(value)
-    return found[0] if found is not None and found[1] == "must be a finite number" else None
-
-
 def _first_line(exc: Exception) -> str:
     return str(exc).split(";")[0].splitlines()[0] if str(exc) else type(exc).__name__
 

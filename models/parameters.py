@@ -19,7 +19,6 @@ stands for "automatic".
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 
 from pantohil.models.catenary.interface import CATENARIES
@@ -355,8 +354,3 @@ def fmu_values(fmu: str, values: dict, resolved: dict | None = None) -> dict:
         else:
             out[names[0]] = value
     return out
-
-
-def is_finite_number(x) -> bool:
-    """Whether x is an int or float (not a bool) and finite."""
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)

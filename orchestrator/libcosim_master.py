@@ -159,24 +159,3 @@ class LibcosimMaster(RecordingMaster):
     def close(self) -> None:
         """Release the execution (its slaves are freed when it is collected; the FMU libraries stay loaded)."""
         self._ex = None  # the execution frees its slaves when collected
-
-
-def run_libcosim(fmus: dict[str, Path], connections, dt: float, steps: int, parameters: dict[str, dict],
-                 watch: list[tuple[str, str]], record_last: int | None = None) -> dict[tuple[str, str], np.ndarray]:
-    """Step `steps` times; return each watched (fmu, variable) after each of the last `record_last`
-    steps (all steps by default). Inputs are watched as (fmu, input name)."""
-    record = steps if record_last is None else min(record_last, steps)
-    master = LibcosimMaster(fmus, connections, parameters, dt, capacity=steps)
-    try:
-        master.advance(steps - record)
-        master.step_block(record)
-        master.sync()
-        out = {}
-        for fmu, var in watch:
-            if var in master.input_names.get(fmu, []):
-                out[(fmu, var)] = master.record_in[fmu][steps - record:steps, master.input_names[fmu].index(var)]
-            else:
-                out[(fmu, var)] = master.column(fmu, var, steps - record, steps)
-        return out
-    finally:
-        master.close()

@@ -78,10 +78,6 @@ class PfemHil:
         """Index b of the virtual span (block) the next measured force belongs to."""
         return self.k // self.n
 
-    def current_height(self, label: int) -> float:
-        """The converging estimate of the contact-wire height at a sample."""
-        return float(self.z[label])
-
     def command_at(self, z: np.ndarray, target: int) -> float:
         """The height to command for sample `target`: z there, or (A z) there with the rig compensated."""
         return float(z[target]) if self.comp is None else self.comp.command(z, target)

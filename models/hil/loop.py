@@ -115,10 +115,6 @@ class PeriodicHil:
         """Index b of the virtual span (block) the next measured force belongs to."""
         return self.k // self.n
 
-    def current_height(self, label: int) -> float:
-        """The converging estimate of the wire height at a sample (what the pantograph sees there)."""
-        return float(self.z[label])
-
     def step(self, force: float) -> float:
         """Take the force measured at the current sample and return the height to command.
 

@@ -376,8 +376,3 @@ def harmonic_responses(ff: FormFinding, omegas, x_load: float, absorbing: bool =
         out = np.zeros(len(sec.x), dtype=complex)
         out[on] = u[pos[cw[on]]]
         yield out
-
-
-def harmonic_response(ff: FormFinding, omega: float, x_load: float, absorbing: bool = True) -> np.ndarray:
-    """One frequency of `harmonic_responses`."""
-    return next(harmonic_responses(ff, [omega], x_load, absorbing))

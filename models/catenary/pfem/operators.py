@@ -100,12 +100,6 @@ def dropper_windows(x_m: np.ndarray, speed_m_s: float, dt_s: float, n: int) -> n
     return np.round(np.asarray(x_m) / (speed_m_s * dt_s)).astype(int) - n // 2
 
 
-def _real_times_complex(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """A @ B for real A and complex B, as one real matrix product."""
-    B = np.ascontiguousarray(B)
-    return (A @ B.view(np.float64)).view(np.complex128)
-
-
 def _combine(H: np.ndarray, n_keep: int) -> np.ndarray:
     """Harmonics j = 0..n_keep-1 of Re(h) from the complex harmonics H[j] of h for j = -(n_keep-1)..n_keep-1
     (axis 0, index j + n_keep - 1)."""
