@@ -3,7 +3,10 @@ messages of the records that are complete in the file, and remembers where the n
 
 The framing of MCAP records (opcode: 1 byte, length: uint64 little-endian, then the content) tells
 where a complete record ends; the records themselves (chunks, schemas, channels, messages) are read
-by the mcap library.
+by the mcap library. The writer (foxglove-sdk's, the mcap crate) writes a chunk with placeholders
+(length and sizes all ones), then seeks back and patches its length and then its header field by
+field: a chunk whose length is final but whose compressed size does not yet agree with it, at the end
+of what is in the file, is not complete yet.
 """
 from __future__ import annotations
 
@@ -22,6 +25,8 @@ from pantohil.models.input_files import InputFileError, read_input_chunk
 
 MAGIC = b"\x89MCAP0\r\n"
 _HEADER = struct.Struct("<BQ")
+_CHUNK = 0x06
+_CHUNK_FIXED = 8 + 8 + 8 + 4  # message start and end time, uncompressed size and CRC
 # A record (a chunk of at most CHUNK_BYTES, compressed) is far smaller than MAX_RECORD_BYTES. A growing file
 # may show a huge length for a while (the writer patches a record's length once it is written), so a length
 # is not refused by itself: a poll that reads a whole window of MAX_POLL_BYTES without one complete record is.
@@ -35,13 +40,31 @@ class McapFollowError(InputError):
     pass
 
 
+def chunk_header_settled(data: bytes, offset: int, length: int) -> bool:
+    """Whether the chunk record at `offset` (content `length` bytes) has its header patched: its
+    compression name and compressed size account for exactly its length (MCAP spec, Chunk)."""
+    body = offset + _HEADER.size
+    if length < _CHUNK_FIXED + 4 + 8:
+        return False
+    (name_bytes,) = struct.unpack_from("<I", data, body + _CHUNK_FIXED)
+    size_at = body + _CHUNK_FIXED + 4 + name_bytes
+    if size_at + 8 > body + length:
+        return False
+    (compressed,) = struct.unpack_from("<Q", data, size_at)
+    return size_at + 8 + compressed == body + length
+
+
 def complete_records_end(data: bytes, start: int) -> tuple[int, bool]:
-    """Offset after the last complete record of data[start:], and whether the footer is among them."""
+    """Offset after the last complete record of data[start:], and whether the footer is among them. A
+    chunk at the end of the data whose header is still being patched is not complete; followed by more
+    data, it is what the writer left (a damaged one is refused when it is read)."""
     offset, footer = start, False
     while offset + _HEADER.size <= len(data):
         opcode, length = _HEADER.unpack_from(data, offset)
         end = offset + _HEADER.size + length
         if end > len(data):
+            break
+        if opcode == _CHUNK and end == len(data) and not chunk_header_settled(data, offset, length):
             break
         offset, footer = end, footer or opcode == 0x02
     return offset, footer

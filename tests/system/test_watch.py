@@ -58,6 +58,31 @@ def test_follower_reads_complete_records_of_a_growing_file(tmp_path):
         assert spans == list(range(len(spans)))  # a prefix, in order, nothing invented
 
 
+def test_a_chunk_whose_header_is_being_patched_is_not_read_yet(tmp_path):
+    """The writer patches a finished chunk's length, then its header field by field: seen between the two,
+    the chunk's compressed size is still all ones. The follower waits for it instead of failing ("a
+    record cannot be read"), and reads it once it is patched."""
+    path = tmp_path / "run.mcap"
+    writer = McapWriter(path, GROUPS, {"case": "patched"})
+    _span(writer, 0)
+    writer.close()
+    whole = path.read_bytes()
+    offset = len(b"\x89MCAP0\r\n")
+    while whole[offset] != 0x06:  # the first chunk record
+        offset += 9 + int.from_bytes(whole[offset + 1:offset + 9], "little")
+    length = int.from_bytes(whole[offset + 1:offset + 9], "little")
+    end = offset + 9 + length
+    name_bytes = int.from_bytes(whole[offset + 9 + 28:offset + 9 + 32], "little")
+    size_at = offset + 9 + 32 + name_bytes
+    half = whole[:size_at] + b"\xff" * 8 + whole[size_at + 8:end]  # length patched, compressed size not yet
+    growing = tmp_path / "growing.mcap"
+    growing.write_bytes(half)
+    follower = McapFollower(growing)
+    assert follower.poll() == [] and follower.offset == offset
+    growing.write_bytes(whole[:end])  # the header patched
+    assert [m["span"] for topic, _, m in follower.poll() if topic == "/convergence"] == [0]
+
+
 @pytest.mark.slow
 def test_watch_follows_a_run_to_its_end(tmp_path):
     out = tmp_path / "run"
