@@ -13,6 +13,7 @@ import contextlib
 import math
 import shutil
 import signal
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -329,31 +330,15 @@ def _add_direct_command(sub) -> None:
     direct.add_argument("--out", type=Path, help="also write the result as JSON to this file")
 
 
-COMMANDS = (  # the order of `pantohil --help`
-    _add_run_command,
-    _add_watch_command,
-    _add_rig_emulator_command,
-    _add_rig_identify_command,
-    _add_catenary_command,
-    _add_build_command,
-    _add_package_command,
-    _add_fem_sim_command,
-    _add_compare_command,
-    _add_stability_command,
-    _add_sweep_command,
-    _add_example_command,
-    _add_direct_command,
-    _add_cases_command,
-    _add_export_command,
-)
-
-
 def _parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="pantohil", description="HIL pantograph tests against a virtual periodic "
                                                                "catenary, built from FMI 2.0 co-simulation units.")
     sub = ap.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    for add_command in COMMANDS:
+    for add_command, handler in COMMANDS:
+        known = set(sub.choices)
         add_command(sub)
+        (name,) = set(sub.choices) - known  # the command the function added
+        sub.choices[name].set_defaults(handler=handler)
     return ap
 
 
@@ -774,11 +759,23 @@ def _cmd_example(args) -> int:
     return 0
 
 
-COMMAND_HANDLERS = {"build": "_cmd_build", "direct": "_cmd_direct", "package": "_cmd_package",
-                    "rig-emulator": "_cmd_emulator", "rig-identify": "_cmd_identify", "catenary": "_cmd_catenary",
-                    "example": "_cmd_example", "fem-sim": "_cmd_fem_sim", "compare": "_cmd_compare",
-                    "stability": "_cmd_stability", "sweep": "_cmd_sweep", "watch": "_cmd_watch", "cases": "_cmd_cases",
-                    "export": "_cmd_export"}
+COMMANDS = (  # each command's parser and its handler, in the order of `pantohil --help`
+    (_add_run_command, _cmd_run),
+    (_add_watch_command, _cmd_watch),
+    (_add_rig_emulator_command, _cmd_emulator),
+    (_add_rig_identify_command, _cmd_identify),
+    (_add_catenary_command, _cmd_catenary),
+    (_add_build_command, _cmd_build),
+    (_add_package_command, _cmd_package),
+    (_add_fem_sim_command, _cmd_fem_sim),
+    (_add_compare_command, _cmd_compare),
+    (_add_stability_command, _cmd_stability),
+    (_add_sweep_command, _cmd_sweep),
+    (_add_example_command, _cmd_example),
+    (_add_direct_command, _cmd_direct),
+    (_add_cases_command, _cmd_cases),
+    (_add_export_command, _cmd_export),
+)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -799,7 +796,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.command == "run":  # a stop signal ends the run at a step boundary with a complete record
                 stop.defer()
                 return _guarded(lambda a: _cmd_run(a, stop), args)
-            return _guarded(globals()[COMMAND_HANDLERS[args.command]], args)
+            return _guarded(args.handler, args)
     finally:
         tempfile.tempdir = previous
 
@@ -814,6 +811,10 @@ def _guarded(handler, args) -> int:
         prefix = "an FMU failed: " if isinstance(exc, FmuFailure) else ""
         print(f"pantohil: error: {prefix}{exc.line()}", file=sys.stderr)
         return int(exc.exit_code)
+    except BrokenPipeError:  # the reader of stdout went away (`pantohil cases | head`): nothing more to say
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # so that the interpreter's last flush does not fail again
+        return 0
     except KeyboardInterrupt as exc:  # the output mechanisms have removed what they had not finished
         print(f"pantohil: {args.command} {_interrupted_by(exc)}", file=sys.stderr)
         return _interrupt_code(exc)

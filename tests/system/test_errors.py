@@ -76,3 +76,16 @@ def test_every_exit_code_the_documentation_names_is_in_the_table():
         for m in re.finditer(r"\bexit(?: code)?s? (\d+)\b", path.read_text()):
             named.setdefault(int(m.group(1)), path.name)
     assert named and set(named) <= allowed, {c: f for c, f in named.items() if c not in allowed}
+
+
+def test_output_to_a_reader_that_went_away_ends_quietly():
+    """`pantohil cases | head -1`: the pipe's reader is gone before the listing is written; the command
+    ends with exit 0 and no traceback (a closed read end makes every write fail, whatever the timing)."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        proc = subprocess.run([sys.executable, "-m", "pantohil.orchestrator.cli", "cases"], stdout=write_end,
+                              stderr=subprocess.PIPE, text=True, timeout=300)
+    finally:
+        os.close(write_end)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
