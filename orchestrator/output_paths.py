@@ -104,8 +104,8 @@ def atomic_output_folder(path: Path, option: str = "--out", overwrite: bool = Fa
     sweep_dead_parts(path.parent)
     part = path.parent / f".{path.name}.part-{os.getpid()}"
     shutil.rmtree(part, ignore_errors=True)
-    part.mkdir()
-    try:
+    try:  # mkdir inside: a signal handled on its way back from mkdir still removes the folder
+        part.mkdir()
         yield part
         with shielded():
             _move_into_place(part, path, option, overwrite)
