@@ -27,14 +27,12 @@ from pantohil.models.pantograph.interface import PANTOGRAPHS
 from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.parameters import (
     AUTO,
-    MAX_LIST_LENGTH,
     MAX_SAMPLES_PER_SPAN,
-    REQUIRED,
     SECTIONS,
-    XS_INT_MAX,
-    XS_INT_MIN,
     CaseSections,
     Key,
+    PantographSection,
+    pantograph_parameters,
     section_keys,
 )
 from pantohil.models.rig.chain import RigParameters
@@ -42,6 +40,7 @@ from pantohil.models.rig.drive_chain import RigSpec, frequency_response
 from pantohil.models.rig.drive_chain import latency_steps as chain_latency_steps
 from pantohil.models.rig.drive_chain import pattern_spans as chain_pattern_spans
 from pantohil.models.rig.rig_file import RigFileError, load_rig_file
+from pantohil.models.schema import FileSchema
 
 _RIG_CHAIN_KEYS = ("delay_steps", "comm_decimation", "servo_bandwidth_hz", "servo_damping", "loadcell_cutoff_hz")
 DEFAULT_CASE = CASES_DIR / "asm_250.toml"
@@ -51,6 +50,7 @@ class CaseError(InputError):
     """A case that cannot run; the message is one line naming the key."""
 
 
+CASE_FILE = FileSchema("case file", SECTIONS, CaseError, reference="case-reference", to_fmus=True)
 SCHEMA: dict[str, dict[str, Key]] = {section: section_keys(section) for section in SECTIONS}
 """Every case key, by section, derived from the declarations in models/parameters.py."""
 
@@ -101,97 +101,9 @@ def _override_value(item: str, dotted: str, value: str):
         raise CaseError(f"override {item[:60]!r}: {message}") from None
 
 
-def _shown(value) -> str:
-    """A refused number as given, with every digit that tells it from the range's bound (repr)."""
-    return str(value) if isinstance(value, int) else repr(float(value))
-
-
-def _coerce_number(key: Key, value):
-    name, p = key.dotted, key.param
-    if key.type is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise CaseError(f"{name}: expected an integer, got {value!r}")
-        if not XS_INT_MIN <= value <= XS_INT_MAX:
-            raise CaseError(f"{name}: {value} is outside the FMI integer range [{XS_INT_MIN}, {XS_INT_MAX}]")
-    elif isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise CaseError(f"{name}: expected a number, got {value!r}")
-    elif not math.isfinite(value):
-        raise CaseError(f"{name}: must be a finite number, got {value!r}")
-    else:
-        value = float(value)
-    if not p.contains(value):
-        unit = f" {p.unit}" if p.unit != "1" else ""
-        shown = _shown(value)
-        raise CaseError(f"{name}: {shown}{unit} is outside its range {p.range_text()}")
-    return value
-
-
-def _coerce_list(key: Key, value) -> list:
-    name, p = key.dotted, key.param
-    if not isinstance(value, list):
-        raise CaseError(f"{name}: expected a list of numbers, got {value!r}")
-    if len(value) > MAX_LIST_LENGTH:
-        raise CaseError(f"{name}: {len(value)} values, above the limit of {MAX_LIST_LENGTH}")
-    for i, v in enumerate(value):
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise CaseError(f"{name}[{i}]: expected a number, got {v!r}")
-        if not math.isfinite(v):
-            raise CaseError(f"{name}[{i}]: must be a finite number, got {v!r}")
-        if not p.contains(v):
-            raise CaseError(
-                f"{name}[{i}]: {_shown(v)} {p.unit} is outside its range {p.range_text()}".replace(" 1 is", " is")
-            )
-    return [float(v) for v in value]
-
-
-def _coerce(key: Key, value):
-    """A given value checked against its declaration (type, finiteness, FMI type, range, choices)."""
-    name, p = key.dotted, key.param
-    if p.auto and value == AUTO:
-        return AUTO
-    if p.choices:
-        if isinstance(value, bool) != isinstance(p.choices[0], bool) or value not in p.choices:
-            raise CaseError(f"{name}: must be {p.range_text()} (got {value!r})")
-        return value
-    if key.type in (int, float):
-        try:
-            return _coerce_number(key, value)
-        except CaseError as exc:
-            if p.auto and not isinstance(value, str):
-                raise CaseError(f"{exc} (or \"{AUTO}\")") from None
-            raise
-    if key.type is bool and not isinstance(value, bool):
-        raise CaseError(f"{name}: expected true or false, got {value!r}")
-    if key.type is str and not isinstance(value, str):
-        raise CaseError(f"{name}: expected a string, got {value!r}")
-    if key.type is tuple:
-        return _coerce_list(key, value)
-    return value
-
-
 def validate(raw: dict) -> dict:
     """Fill defaults and check every key against its declaration; returns {section: {key: value}}."""
-    for section in raw:
-        if section not in SCHEMA:
-            raise CaseError(f"{section}: unknown section (known: {', '.join(SCHEMA)})")
-        if not isinstance(raw[section], dict):
-            raise CaseError(f"{section}: expected a table of keys")
-    out = {}
-    for section, keys in SCHEMA.items():
-        given = raw.get(section, {})
-        for name in given:
-            if name not in keys:
-                raise CaseError(f"{section}.{name}: unknown key (known: {', '.join(keys)})")
-        out[section] = {}
-        for name, key in keys.items():
-            if name in given:
-                value = _coerce(key, given[name])
-            elif key.default is REQUIRED:
-                raise CaseError(f"{section}.{name}: missing (required)")
-            else:
-                value = list(key.default) if isinstance(key.default, tuple) else key.default
-            out[section][name] = value
-    return out
+    return CASE_FILE.validate(raw)
 
 
 @dataclass
@@ -340,13 +252,8 @@ def _check_pantograph(v: dict) -> PantographParameters:
         if any(x <= 0 for x in p[key]) if key == "masses_kg" else any(x < 0 for x in p[key]):
             bound = "> 0" if key == "masses_kg" else ">= 0"
             raise CaseError(f"pantograph.{key}: every value must be {bound} (got {p[key]})")
-    uplift = mean_force_en50367(v["run"]["speed_kmh"]) if p["uplift_force_N"] == AUTO else p["uplift_force_N"]
-    n = len(p["masses_kg"])
-    return PantographParameters(masses_kg=tuple(p["masses_kg"]),
-                                stiffnesses_N_m=tuple(p["stiffnesses_N_m"][:n] or [0.0]),
-                                dampings_Ns_m=tuple(p["dampings_Ns_m"][:n] or [0.0]),
-                                contact_stiffness_N_m=p["contact_stiffness_N_m"], uplift_force_N=uplift,
-                                model=p["model"], gravity_m_s2=p["gravity_m_s2"])
+    section = PantographSection(**{k: tuple(x) if isinstance(x, list) else x for k, x in p.items()})
+    return pantograph_parameters(section, mean_force_en50367(v["run"]["speed_kmh"]))
 
 
 def _analysis(case_path: Path, name: str, key: str):

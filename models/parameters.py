@@ -1,9 +1,9 @@
 """One declaration per case parameter: a frozen dataclass per case section.
 
-Each field's metadata (`Param`) carries the unit, the range, the description, the FMI type and the FMU
-that receives it. The case schema and its validation (`models/case.py`), the FMU variable tables
-(`fmus/`), the builder's mapping (`builder/build_fmus.py`) and the key reference
-(`docs/case-reference.md`) are derived from these declarations.
+Each field's metadata (`Param`, models/schema.py) carries the unit, the range, the description, the FMI
+type and the FMU that receives it. The case schema and its validation (`models/case.py`), the FMU
+variable tables (`fmus/`), the builder's mapping (`builder/build_fmus.py`) and the key reference
+(`docs/case-reference.md`, orchestrator/file_reference.py) are derived from these declarations.
 
 Naming rule (case keys, FMU variables and summary fields): a parameter has one name, `snake_case`,
 ending in its SI unit (`_m`, `_s`, `_N`, `_N_m`, `_kg_m`, `_hz`, `_1_s`, ...; none for a pure number
@@ -18,75 +18,29 @@ stands for "automatic".
 """
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from pantohil.models.catenary.interface import CATENARIES
 from pantohil.models.pantograph.interface import PANTOGRAPHS
-
-AUTO = "auto"
-REQUIRED = object()  # a field without a default: the case must give it
-
-XS_INT_MIN = -(2**31)  # FMI 2.0 Integer is xs:int
-XS_INT_MAX = 2**31 - 1
+from pantohil.models.pantograph.lumped import PantographParameters
+from pantohil.models.rig.actuator import ActuatorLimits
+from pantohil.models.rig.chain import RigParameters
+from pantohil.models.schema import (  # noqa: F401 (the case's names for the schema's parts)
+    AUTO,
+    MAX_LIST_LENGTH,
+    REQUIRED,
+    XS_INT_MAX,
+    XS_INT_MIN,
+    Key,
+    Param,
+    declared_keys,
+    json_like,
+    param,
+)
 
 # Limits on sizes, named in the messages that refuse them (checked before anything is allocated).
 MAX_SAMPLES_PER_SPAN = 100_000
 MAX_SPANS = 10_000
-MAX_LIST_LENGTH = 100
-
-
-@dataclass(frozen=True)
-class Param:
-    """What a case key is: unit (FMI unit string, "1" for none), description and range."""
-
-    unit: str
-    description: str
-    low: float | None = None
-    high: float | None = None
-    low_open: bool = False
-    high_open: bool = False
-    choices: tuple = ()
-    fmu: str | None = None  # the FMU whose variable (named by the naming rule) receives the value
-    auto: bool = False  # "auto" (computed by pantohil) is allowed, and is the default
-    fmu_items: int = 0  # a list reaches the FMU as this many variables <key>_1 ... (padded with 0)
-    fmu_start: float | None = None  # the FMU variable's start value where the key has no default number
-
-    def range_text(self) -> str:
-        """The range as a mathematician writes it, e.g. `(0, 1e+06]`."""
-        if self.choices:
-            return " or ".join(json_like(c) for c in self.choices)
-        if self.low is None and self.high is None:
-            return "any"
-        lo = "-inf" if self.low is None else f"{self.low:g}"
-        hi = "inf" if self.high is None else f"{self.high:g}"
-        opening = "(" if self.low_open or self.low is None else "["
-        closing = ")" if self.high_open or self.high is None else "]"
-        return f"{opening}{lo}, {hi}{closing}"
-
-    def contains(self, x: float) -> bool:
-        """Whether x lies in the parameter's range (open or closed at each end)."""
-        if self.low is not None and (x <= self.low if self.low_open else x < self.low):
-            return False
-        return not (self.high is not None and (x >= self.high if self.high_open else x > self.high))
-
-
-def json_like(value) -> str:
-    """A value as written in TOML or JSON (strings quoted, booleans lower case), for messages and docs."""
-    if isinstance(value, str):
-        return f'"{value}"'
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return f"{value:g}" if isinstance(value, float) else str(value)
-
-
-def param(default, unit: str, description: str, low=None, high=None, *, low_open=False, high_open=False,
-          choices=(), fmu=None, auto=False, fmu_items=0, fmu_start=None):
-    """A dataclass field declaring one case key."""
-    meta = Param(unit, description, low, high, low_open, high_open, tuple(choices), fmu, auto, fmu_items, fmu_start)
-    if isinstance(default, (list, tuple)):
-        return field(default=tuple(default), metadata={"param": meta})
-    return field(default=default, metadata={"param": meta})
 
 
 @dataclass(frozen=True)
@@ -152,19 +106,26 @@ class PantographSection:
                                 fmu="pantograph")
 
 
+def pantograph_parameters(section: PantographSection, uplift_force_N: float | None = None) -> PantographParameters:
+    """The pantograph model's parameters of a [pantograph] section: its lists cut to its masses (an empty
+    list: one element of 0), the uplift the section gives, or `uplift_force_N` where it says "auto"."""
+    uplift = section.uplift_force_N
+    if uplift == AUTO:
+        if uplift_force_N is None:
+            raise ValueError("pantograph.uplift_force_N is \"auto\": the uplift in use must be given")
+        uplift = uplift_force_N
+    n = len(section.masses_kg)
+    return PantographParameters(masses_kg=tuple(section.masses_kg),
+                                stiffnesses_N_m=tuple(section.stiffnesses_N_m[:n]) or (0.0,),
+                                dampings_Ns_m=tuple(section.dampings_Ns_m[:n]) or (0.0,),
+                                contact_stiffness_N_m=section.contact_stiffness_N_m, uplift_force_N=float(uplift),
+                                model=section.model, gravity_m_s2=section.gravity_m_s2)
+
+
 @dataclass(frozen=True)
-class RigSection:
+class RigSection(RigParameters):
     """[rig]: the simulated rig between model and pantograph (Paper B sec. 4, Paper D sec. 2)."""
 
-    delay_steps: int = param(0, "1", "pure delay of the height path [steps]", 0, 100_000, fmu="rig")
-    comm_decimation: int = param(1, "1", "N_com: one height of every N_com reaches the drive", 1, 10_000,
-                                 fmu="rig")
-    servo_bandwidth_hz: float = param(0.0, "Hz", "servo natural frequency (0: ideal tracking)", 0.0, 1e5, fmu="rig")
-    servo_damping: float = param(0.7, "1", "servo damping ratio", 0.0, 100.0, low_open=True, fmu="rig")
-    loadcell_cutoff_hz: float = param(0.0, "Hz", "load-cell low-pass cut-off (0: none)", 0.0, 1e5, fmu="rig")
-    force_offset_N: float = param(0.0, "N", "force added to the measurement", -1e4, 1e4, fmu="rig")
-    noise_std_N: float = param(0.0, "N", "measurement noise standard deviation", 0.0, 1e4, fmu="rig")
-    noise_seed: int = param(0, "1", "seed of the measurement noise", 0, XS_INT_MAX, fmu="rig")
     file: str = param("", "1", "rig file (relative to the case; models/data/rigs/*.toml): the chain of Paper B or "
                                "D, which replaces the five keys above (force offset and noise still apply)")
 
@@ -198,15 +159,7 @@ class LinkSection:
                                          0.0, 1.0, low_open=True)
 
 
-@dataclass(frozen=True)
-class ActuatorSection:
-    """[actuator]: the limits the adapter keeps every command within (LinMot PS10-70x240U)."""
-
-    stroke_min_m: float = param(-0.12, "m", "lowest actuator position", -10.0, 10.0, fmu="adapter")
-    stroke_max_m: float = param(0.12, "m", "highest actuator position", -10.0, 10.0, fmu="adapter")
-    max_velocity_m_s: float = param(5.4, "m/s", "velocity limit", 0.0, 100.0, low_open=True, fmu="adapter")
-    max_acceleration_m_s2: float = param(300.0, "m/s2", "acceleration limit (force limit / moving mass)",
-                                         0.0, 1e5, low_open=True, fmu="adapter")
+ActuatorSection = ActuatorLimits  # [actuator]: the limits the adapter keeps every command within
 
 
 @dataclass(frozen=True)
@@ -292,28 +245,9 @@ class CaseSections:
                                               for key, v in values[name].items()}) for name in SECTIONS})
 
 
-@dataclass(frozen=True)
-class Key:
-    """One declared case key: section, name, Python type, default and its Param."""
-
-    section: str
-    name: str
-    type: type
-    default: object
-    param: Param
-
-    @property
-    def dotted(self) -> str:
-        """The key as `section.name`."""
-        return f"{self.section}.{self.name}"
-
-
 def section_keys(section: str) -> dict[str, Key]:
-    """The declared keys of a section, in declaration order."""
-    cls = SECTIONS[section]
-    hints = {"str": str, "float": float, "int": int, "bool": bool, "tuple": tuple}
-    return {f.name: Key(section, f.name, hints[f.type] if isinstance(f.type, str) else f.type, f.default,
-                        f.metadata["param"]) for f in dataclasses.fields(cls)}
+    """The declared keys of a case section, in declaration order."""
+    return declared_keys(section, SECTIONS[section])
 
 
 def all_keys() -> list[Key]:

@@ -37,6 +37,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from datetime import datetime, UTC
 from pathlib import Path
 
@@ -44,6 +45,7 @@ import numpy as np
 
 from pantohil.models.case import SCHEMA, CaseError, load_case
 from pantohil.models.input_files import InputFileError, load_toml
+from pantohil.models.schema import FileSchema, param
 from pantohil.models.storage import atomic_path
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
@@ -60,8 +62,36 @@ RESULTS_EVERY_S = 2.0  # results.csv/.parquet rewritten at most this often while
 MAX_POINTS = 10_000  # points of a sweep, all grid keys together
 
 
-def _fail(path: Path, what: str):
-    raise CaseError(f"sweep file {path}: {what}")
+class SweepFileError(CaseError):
+    """A sweep file that cannot run; one line naming the key."""
+
+
+@dataclass(frozen=True)
+class SweepSection:
+    """[sweep]: what the sweep runs and how its results are drawn."""
+
+    name: str = param("", "1", "sweep name (empty: the file's name)")
+    description: str = param("", "1", "free text")
+    case: str = param("", "1", "case file, relative to the sweep file (empty: the built-in case)")
+    kind: str = param("run", "1", "a virtual HIL run per point, or the closed form of Paper A (with the extra "
+                                  "key `direct.second_pantograph_m` for a trailing pantograph)", choices=KINDS)
+    engine: str = param("inprocess", "1", "kind run: the FMU path (`pantohil run --engine fmu`), or "
+                                          "the FMUs' models without the FMI boundary; the same results",
+                        choices=ENGINES)
+    plot_x: str = param("", "1", "grid key on the plots' x axis (empty: the first grid key)")
+    point_plots: bool = param(False, "1", "kind run: each point's run folder with its figures too")
+
+
+SWEEP_FILE = FileSchema(
+    "sweep file", {"sweep": SweepSection}, SweepFileError,
+    free_sections={"set": "case keys fixed for every point: `\"section.key\" = value`",
+                   "grid": "case keys to sweep: `\"section.key\" = [values]` or `{ start, stop, num [, log = "
+                           "true] }`; every combination of the values is a point (at most 10000)"},
+    reference="sweep-reference")
+
+
+def _fail(path: Path, what: str, key: str | None = None):
+    raise SweepFileError(f"sweep file {path}: {what}", key=key)
 
 
 def _number(path: Path, key: str, what: str, v) -> float:
@@ -122,31 +152,19 @@ def load_sweep(path: Path) -> dict:
         raw = load_toml(path, "sweep file")
     except InputFileError as exc:
         raise CaseError(str(exc)) from None
-    unknown = set(raw) - {"sweep", "set", "grid"}
-    if unknown:
-        _fail(path, f"unknown section [{sorted(unknown)[0]}] (sections: sweep, set, grid)")
-    for section in ("sweep", "set", "grid"):
-        if not isinstance(raw.get(section, {}), dict):
-            _fail(path, f"[{section}] must be a table (got {raw[section]!r})")
-    head = raw.get("sweep", {})
-    for key in ("name", "case", "kind", "plot_x", "description", "engine"):
-        if key in head and not isinstance(head[key], str):
-            _fail(path, f"sweep.{key} must be a string (got {head[key]!r})")
-    if not isinstance(head.get("point_plots", False), bool):
-        _fail(path, f"sweep.point_plots must be true or false (got {head['point_plots']!r})")
-    bad = set(head) - {"name", "case", "kind", "plot_x", "description", "engine", "point_plots"}
-    if bad:
-        _fail(path, f"unknown key sweep.{sorted(bad)[0]}")
-    kind = head.get("kind", "run")
-    if kind not in KINDS:
-        _fail(path, f"sweep.kind must be one of {', '.join(KINDS)} (got {kind!r})")
+    try:
+        v = SWEEP_FILE.validate(raw)
+    except SweepFileError as exc:
+        _fail(path, str(exc), exc.key)
+    head = v["sweep"]
+    kind = head["kind"]
     case = (path.parent / head["case"]).resolve() if head.get("case") else None
     if case is not None and not case.exists():
         _fail(path, f"sweep.case {head['case']!r}: {case} does not exist")
-    grid = raw.get("grid", {})
+    grid = v["grid"]
     if not grid:
         _fail(path, "[grid] names no key to sweep")
-    fixed = raw.get("set", {})
+    fixed = v["set"]
     for key in grid:
         _check_key(path, key, kind, "grid")
     for key in fixed:
@@ -155,7 +173,7 @@ def load_sweep(path: Path) -> dict:
     total = math.prod(len(v) for v in values.values())
     if total > MAX_POINTS:
         _fail(path, f"the grid has {total} points, above the limit of {MAX_POINTS} points")
-    plot_x = head.get("plot_x", next(iter(grid)))
+    plot_x = head["plot_x"] or next(iter(grid))
     if plot_x not in grid:
         _fail(path, f"sweep.plot_x {plot_x!r} is not a grid key")
     points = []
@@ -169,17 +187,17 @@ def load_sweep(path: Path) -> dict:
             _fail(path, f"point {assign}: {exc}")
         digest = hashlib.sha1(json.dumps([overrides, extra], sort_keys=True).encode()).hexdigest()[:10]
         points.append({"id": f"p{len(points):03d}-{digest}", "assign": assign, "overrides": overrides, "extra": extra})
-    definition = {"name": head.get("name", path.stem), "kind": kind, "case": str(case) if case else None,
+    definition = {"name": head["name"] or path.stem, "kind": kind, "case": str(case) if case else None,
                   "set": fixed, "grid": values, "plot_x": plot_x}
     definition["hash"] = hashlib.sha1(json.dumps(definition, sort_keys=True, default=str).encode()).hexdigest()[:16]
-    definition["engine"] = _engine(path, head.get("engine", "inprocess"))  # not hashed: the same results
-    definition["point_plots"] = head.get("point_plots", False)  # not hashed either
+    definition["engine"] = head["engine"]  # not hashed: the same results
+    definition["point_plots"] = head["point_plots"]  # not hashed either
     return {"definition": definition, "points": points}
 
 
 def _engine(path: Path, engine: str) -> str:
     if engine not in ENGINES:
-        _fail(path, f"sweep.engine must be one of {', '.join(ENGINES)} (got {engine!r})")
+        _fail(path, f"sweep.engine must be one of {', '.join(ENGINES)} (got {engine!r})", "sweep.engine")
     return engine
 
 

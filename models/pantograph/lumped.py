@@ -18,15 +18,17 @@ GRAVITY_M_S2 = 9.81
 
 @dataclass(frozen=True)
 class PantographParameters:
-    """A chain of 1 to 3 lumped masses (Paper A Table A.3), or a rigid mass (Paper B sec. 5.1)."""
+    """A chain of 1 to 3 lumped masses (Paper A Table A.3), or a rigid mass (Paper B sec. 5.1); made from a
+    case's [pantograph] section (its keys and defaults: models/parameters.PantographSection) by
+    `pantograph_parameters`."""
 
-    masses_kg: tuple = (6.6, 5.8, 5.8)
-    stiffnesses_N_m: tuple = (7000.0, 14100.0, 80.0)
-    dampings_Ns_m: tuple = (0.0, 0.0, 70.0)
-    contact_stiffness_N_m: float = 50000.0
-    uplift_force_N: float = 130.0
-    model: str = "chain"  # a name in models/pantograph/interface.PANTOGRAPHS
-    gravity_m_s2: float = 0.0  # only the rigid mass feels it (its load cell is not tared)
+    masses_kg: tuple
+    stiffnesses_N_m: tuple
+    dampings_Ns_m: tuple
+    contact_stiffness_N_m: float
+    uplift_force_N: float
+    model: str  # a name in models/pantograph/interface.PANTOGRAPHS
+    gravity_m_s2: float  # only the rigid mass feels it (its load cell is not tared)
 
     @property
     def n(self) -> int:

@@ -11,14 +11,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pantohil.models.schema import param
+
 
 @dataclass(frozen=True)
 class ActuatorLimits:
-    """Stroke, velocity and acceleration limits of the actuator (LinMot PS10-70x240U: 5.4 m/s, 1650 N)."""
-    stroke_min_m: float = -0.12
-    stroke_max_m: float = 0.12
-    max_velocity_m_s: float = 5.4
-    max_acceleration_m_s2: float = 300.0  # ~1650 N over a 5.5 kg slider and pantograph head
+    """[actuator] of a case, [limits] of a rig file: the limits every command is kept within (LinMot
+    PS10-70x240U: 5.4 m/s, 1650 N)."""
+
+    stroke_min_m: float = param(-0.12, "m", "lowest actuator position", -10.0, 10.0, fmu="adapter")
+    stroke_max_m: float = param(0.12, "m", "highest actuator position", -10.0, 10.0, fmu="adapter")
+    max_velocity_m_s: float = param(5.4, "m/s", "velocity limit", 0.0, 100.0, low_open=True, fmu="adapter")
+    max_acceleration_m_s2: float = param(300.0, "m/s2", "acceleration limit (force limit / moving mass: ~1650 N "
+                                                        "over a 5.5 kg slider and pantograph head)",
+                                         0.0, 1e5, low_open=True, fmu="adapter")
 
     def __post_init__(self):
         if not self.stroke_min_m < self.stroke_max_m:

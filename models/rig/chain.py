@@ -14,19 +14,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pantohil.models.schema import XS_INT_MAX, param
+
 
 @dataclass(frozen=True)
 class RigParameters:
-    """Rig data; the defaults are a pure delay of `delay_steps`."""
+    """The simulated rig's keys of a case's [rig] (the rig file's name apart); the defaults are an ideal rig."""
 
-    delay_steps: int = 0
-    comm_decimation: int = 1  # N_com; 1 sends every height and disables the drive ramp
-    servo_bandwidth_hz: float = 0.0  # 0: ideal position tracking
-    servo_damping: float = 0.7
-    loadcell_cutoff_hz: float = 0.0  # 0: no load-cell filter
-    force_offset_N: float = 0.0
-    noise_std_N: float = 0.0
-    noise_seed: int = 0
+    delay_steps: int = param(0, "1", "pure delay of the height path [steps]", 0, 100_000, fmu="rig")
+    comm_decimation: int = param(1, "1", "N_com: one height of every N_com reaches the drive (1: every height, "
+                                         "no drive ramp)", 1, 10_000, fmu="rig")
+    servo_bandwidth_hz: float = param(0.0, "Hz", "servo natural frequency (0: ideal tracking)", 0.0, 1e5, fmu="rig")
+    servo_damping: float = param(0.7, "1", "servo damping ratio", 0.0, 100.0, low_open=True, fmu="rig")
+    loadcell_cutoff_hz: float = param(0.0, "Hz", "load-cell low-pass cut-off (0: none)", 0.0, 1e5, fmu="rig")
+    force_offset_N: float = param(0.0, "N", "force added to the measurement", -1e4, 1e4, fmu="rig")
+    noise_std_N: float = param(0.0, "N", "measurement noise standard deviation", 0.0, 1e4, fmu="rig")
+    noise_seed: int = param(0, "1", "seed of the measurement noise", 0, XS_INT_MAX, fmu="rig")
 
     def latency_steps(self, dt_s: float) -> int:
         """Whole steps from a commanded height to the actuator reaching it, plus the force path's lag.

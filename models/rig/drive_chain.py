@@ -24,28 +24,37 @@ from functools import lru_cache
 
 import numpy as np
 
+from pantohil.models.schema import param
+
 from .actuator import ActuatorLimits, Limiter
+
+
+MAX_DELAY_STEPS = 100_000  # a delay is shorter than a span, and a span holds at most this many (MAX_SAMPLES_PER_SPAN)
+MAX_DECIMATION = 10_000  # as the case's rig.comm_decimation
 
 
 @dataclass(frozen=True)
 class HeightPath:
-    """Command to actuator height (Paper B sec. 4; Paper D sec. 2)."""
+    """[height] of a rig file: the path of the commanded height to the actuator (Paper B sec. 4, Paper D
+    sec. 2)."""
 
-    delay_steps: int = 0
-    decimation: int = 1  # N_com: one height of every N_com reaches the drive
-    ramp_s: float = 0.0  # the drive's ramp from the old to the new reference; 0: N_com dt
-    sub_step_s: float = 0.0  # the drive's sub-reference period; 0: the ramp read at every model step
-    servo_frequency_hz: float = 0.0  # position loop natural frequency; 0: ideal tracking
-    servo_damping: float = 0.7
+    delay_steps: int = param(0, "1", "pure delay to the drive [steps] (shorter than the longest span)", 0,
+                             MAX_DELAY_STEPS)
+    decimation: int = param(1, "1", "N_com: one height of every N_com sent reaches the drive", 1, MAX_DECIMATION)
+    ramp_s: float = param(0.0, "s", "the drive's ramp from the old to the new reference (0: N_com dt)", 0.0)
+    sub_step_s: float = param(0.0, "s", "the drive's sub-reference period (0: the ramp read at every model step)",
+                              0.0)
+    servo_frequency_hz: float = param(0.0, "Hz", "position loop natural frequency (0: ideal tracking)", 0.0)
+    servo_damping: float = param(0.7, "1", "position loop damping ratio", 0.0, low_open=True)
 
 
 @dataclass(frozen=True)
 class ForcePath:
-    """True to measured force: amplifier low-pass, then acquisition delay."""
+    """[force] of a rig file: the true to the measured force (amplifier low-pass, then acquisition delay)."""
 
-    filter_hz: float = 0.0  # 0: no filter
-    filter_order: int = 2
-    delay_steps: int = 0
+    filter_hz: float = param(0.0, "Hz", "amplifier low-pass cut-off (0: none; below the Nyquist frequency)", 0.0)
+    filter_order: int = param(2, "1", "Butterworth order", 1, 8)
+    delay_steps: int = param(0, "1", "acquisition delay [steps] (shorter than the longest span)", 0, MAX_DELAY_STEPS)
 
 
 @dataclass(frozen=True)

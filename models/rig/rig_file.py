@@ -1,17 +1,18 @@
 """Rig files (TOML): a rig chain as the papers describe it, read into a `RigSpec` and written back
 with a measured frequency response (`pantohil rig-identify`). Every key is declared once below with
-its type, default, range and unit; a bad file raises RigFileError with one line naming the key.
+its type, default, range and unit (models/schema.py; docs/rig-reference.md is generated from them); a
+bad file raises RigFileError with one line naming the key.
 """
 from __future__ import annotations
 
 import cmath
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..errors import InputError
 from ..input_files import InputFileError, load_toml
-from ..parameters import MAX_SAMPLES_PER_SPAN
+from ..schema import REQUIRED, FileSchema, param
 from .actuator import ActuatorLimits
 from .drive_chain import ForcePath, HeightPath, MeasuredResponse, RigSpec
 
@@ -22,127 +23,54 @@ class RigFileError(InputError):
 
 # Bounds on what sets a run's work and memory, each as for the case's keys (models/parameters.py):
 MIN_STEP_S, MAX_STEP_S = 1e-5, 1.0  # the dt a HELLO may carry on the rig link
-MAX_DELAY_STEPS = MAX_SAMPLES_PER_SPAN  # a delay must be shorter than a span, and a span holds at most this many
-DELAY_RANGE = f"must lie in 0..{MAX_DELAY_STEPS} (a delay shorter than the longest span)"
-MAX_DECIMATION = 10_000  # as the case's rig.comm_decimation
 MAX_SUB_STEPS = 100  # drive sub-references per model step (Paper B's drive: 3.2); each costs a loop update
 MAX_RESPONSE_POINTS = 10_000  # measured frequencies (rig-identify writes one per kept harmonic)
 
-# section -> key -> (type, default, check, requirement, description [unit])
-SCHEMA = {
-    "rig": {
-        "name": (str, "unnamed", None, "", "rig name"),
-        "description": (str, "", None, "", "free text"),
-        "model_step_s": (float, None, lambda x: MIN_STEP_S <= x <= MAX_STEP_S,
-                         f"must lie in [{MIN_STEP_S:g}, {MAX_STEP_S:g}] s (the rig link's range of dt)",
-                         "model step dt the rig runs at [s]"),
-        "stated_delay_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "total delay the source states [s]"),
-    },
-    "height": {
-        "delay_steps": (int, 0, lambda x: 0 <= x <= MAX_DELAY_STEPS, DELAY_RANGE, "pure delay to the drive [steps]"),
-        "decimation": (int, 1, lambda x: 1 <= x <= MAX_DECIMATION, f"must lie in 1..{MAX_DECIMATION}",
-                       "N_com: one height of every N_com sent [-]"),
-        "ramp_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "drive ramp, 0 = N_com dt [s]"),
-        "sub_step_s": (float, 0.0, lambda x: x >= 0, "must be >= 0", "drive sub-reference period, 0 = none [s]"),
-        "servo_frequency_hz": (
-            float,
-            0.0,
-            lambda x: x >= 0,
-            "must be >= 0",
-            "position loop natural frequency, 0 = ideal [Hz]",
-        ),
-        "servo_damping": (float, 0.7, lambda x: x > 0, "must be > 0", "position loop damping ratio [-]"),
-    },
-    "force": {
-        "filter_hz": (float, 0.0, lambda x: x >= 0, "must be >= 0", "amplifier low-pass cut-off, 0 = none [Hz]"),
-        "filter_order": (int, 2, lambda x: 1 <= x <= 8, "must be 1 to 8", "Butterworth order [-]"),
-        "delay_steps": (int, 0, lambda x: 0 <= x <= MAX_DELAY_STEPS, DELAY_RANGE, "acquisition delay [steps]"),
-    },
-    "limits": {
-        "stroke_min_m": (float, -0.12, None, "", "lowest actuator position [m]"),
-        "stroke_max_m": (float, 0.12, None, "", "highest actuator position [m]"),
-        "max_velocity_m_s": (float, 5.4, lambda x: x > 0, "must be > 0", "motion-profile velocity limit [m/s]"),
-        "max_acceleration_m_s2": (
-            float,
-            300.0,
-            lambda x: x > 0,
-            "must be > 0",
-            "motion-profile acceleration limit [m/s^2]",
-        ),
-    },
-    "response": {
-        "frequencies_hz": (list, None, None, "", "measured frequencies [Hz]"),
-        "height_gain": (list, None, None, "", "|actuator height / command| [-]"),
-        "height_phase_deg": (list, None, None, "", "phase of actuator height / command [deg]"),
-        "force_gain": (list, None, None, "", "|measured / true force| [-]"),
-        "force_phase_deg": (list, None, None, "", "phase of measured / true force [deg]"),
-    },
-}
+@dataclass(frozen=True)
+class RigHeaderSection:
+    """[rig]: what the rig is and the step it runs at."""
+
+    name: str = param("unnamed", "1", "rig name")
+    description: str = param("", "1", "free text")
+    model_step_s: float = param(REQUIRED, "s", "model step dt the rig runs at (the rig link's range of dt)",
+                                MIN_STEP_S, MAX_STEP_S)
+    stated_delay_s: float = param(0.0, "s", "total delay the source states", 0.0)
 
 
-def _value(section: str, key: str, raw, typ):
-    name = f"{section}.{key}"
-    if typ is float and isinstance(raw, int) and not isinstance(raw, bool):
-        raw = float(raw)
-    if typ is list:
-        if not isinstance(raw, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in raw):
-            raise RigFileError(f"{name}: expected a list of numbers, got {raw!r}")
-        if not all(math.isfinite(v) for v in raw):
-            raise RigFileError(f"{name}: every value must be finite")
-        return [float(v) for v in raw]
-    if not isinstance(raw, typ) or isinstance(raw, bool):
-        raise RigFileError(f"{name}: expected {typ.__name__}, got {raw!r}")
-    if typ is float and not math.isfinite(raw):
-        raise RigFileError(f"{name}: must be finite, got {raw!r}")
-    return raw
+@dataclass(frozen=True)
+class ResponseSection:
+    """[response]: the rig's measured frequency response at the kept harmonics (`pantohil rig-identify`
+    writes it); all five lists or none, one value per frequency."""
+
+    frequencies_hz: tuple = param(None, "Hz", "measured frequencies, increasing", 0.0, low_open=True,
+                                  max_items=MAX_RESPONSE_POINTS)
+    height_gain: tuple = param(None, "1", "|actuator height / command|", 0.0, low_open=True,
+                               max_items=MAX_RESPONSE_POINTS)
+    height_phase_deg: tuple = param(None, "deg", "phase of actuator height / command",
+                                    max_items=MAX_RESPONSE_POINTS)
+    force_gain: tuple = param(None, "1", "|measured / true force|", 0.0, low_open=True, max_items=MAX_RESPONSE_POINTS)
+    force_phase_deg: tuple = param(None, "deg", "phase of measured / true force", max_items=MAX_RESPONSE_POINTS)
 
 
-def _validated(raw: dict) -> dict:
-    for section in raw:
-        if section not in SCHEMA:
-            raise RigFileError(f"{section}: unknown section (known: {', '.join(SCHEMA)})")
-        if not isinstance(raw[section], dict):
-            raise RigFileError(f"{section}: expected a table of keys")
-    out = {}
-    for section, keys in SCHEMA.items():
-        given = raw.get(section, {})
-        for key in given:
-            if key not in keys:
-                raise RigFileError(f"{section}.{key}: unknown key (known: {', '.join(keys)})")
-        out[section] = {}
-        for key, (typ, default, check, req, _doc) in keys.items():
-            if key not in given:
-                if default is None and section == "rig":
-                    raise RigFileError(f"{section}.{key}: missing (required)")
-                out[section][key] = default
-                continue
-            value = _value(section, key, given[key], typ)
-            if check is not None and not check(value):
-                raise RigFileError(f"{section}.{key}: {req} (got {value!r})")
-            out[section][key] = value
-    return out
+RIG_FILE = FileSchema("rig file", {"rig": RigHeaderSection, "height": HeightPath, "force": ForcePath,
+                                   "limits": ActuatorLimits, "response": ResponseSection}, RigFileError,
+                      reference="rig-reference")
 
 
 def _measured(resp: dict) -> MeasuredResponse | None:
     given = {k: v for k, v in resp.items() if v is not None}
     if not given:
         return None
-    missing = [k for k in SCHEMA["response"] if k not in given]
+    missing = [k for k in resp if k not in given]
     if missing:
-        raise RigFileError(
-            f"response.{missing[0]}: missing (the response needs all of {', '.join(SCHEMA['response'])})"
-        )
+        raise RigFileError(f"response.{missing[0]}: missing (the response needs all of {', '.join(resp)})")
     n = len(given["frequencies_hz"])
-    if n > MAX_RESPONSE_POINTS:
-        raise RigFileError(f"response.frequencies_hz: {n} frequencies, above the limit of {MAX_RESPONSE_POINTS}")
     for key, vals in given.items():
         if len(vals) != n:
             raise RigFileError(f"response.{key}: {len(vals)} values for {n} frequencies")
     freqs = given["frequencies_hz"]
-    if n == 0 or freqs[0] <= 0 or any(b <= a for a, b in zip(freqs, freqs[1:], strict=False)):
+    if n == 0 or any(b <= a for a, b in zip(freqs, freqs[1:], strict=False)):
         raise RigFileError("response.frequencies_hz: one or more frequencies > 0, increasing")
-    if any(g <= 0 for g in given["height_gain"] + given["force_gain"]):
-        raise RigFileError("response: every gain must be > 0")
     z = tuple(
         g * cmath.exp(1j * math.radians(p))
         for g, p in zip(given["height_gain"], given["height_phase_deg"], strict=False)
@@ -155,7 +83,7 @@ def _measured(resp: dict) -> MeasuredResponse | None:
 
 def rig_from_dict(raw: dict) -> RigSpec:
     """Validate a parsed rig file into a RigSpec; RigFileError names the key at fault."""
-    v = _validated(raw)
+    v = RIG_FILE.validate(raw)
     r, h, f, lim = v["rig"], v["height"], v["force"], v["limits"]
     if not lim["stroke_min_m"] < lim["stroke_max_m"]:
         raise RigFileError(f"limits.stroke_max_m: must be above limits.stroke_min_m ({lim['stroke_min_m']:g} m)")
@@ -206,7 +134,7 @@ def rig_sections(spec: RigSpec) -> dict:
         "rig": {"name": spec.name, "description": spec.description, "model_step_s": spec.model_step_s,
                 "stated_delay_s": spec.stated_delay_s},
         "height": vars(spec.height), "force": vars(spec.force),
-        "limits": {k: getattr(lim, k) for k in SCHEMA["limits"]},
+        "limits": {k: getattr(lim, k) for k in RIG_FILE.keys("limits")},
     }
     m = spec.measured
     if m is not None:

@@ -23,7 +23,8 @@ import pytest
 from conftest import pantohil
 
 from pantohil.fmus import udp_protocol as proto
-from pantohil.models.pantograph.lumped import PantographParameters, RigidMass
+from pantohil.models.pantograph.lumped import RigidMass
+from pantohil.models.parameters import PantographSection, pantograph_parameters
 
 pytestmark = pytest.mark.network
 
@@ -306,7 +307,8 @@ def test_rigid_mass_force_matches_python_rigid_mass(start_rig):
     rig = start_rig("--gravity-m-s2", repr(gravity), dt_s=dt, mass_kg=mass)
     heights = [0.02 * math.sin(2 * math.pi * 3.7 * k * dt) + 0.005 * math.sin(2 * math.pi * 41 * k * dt) ** 3
                + 1e-4 * ((k * 7919) % 13) for k in range(1, 401)]
-    python = RigidMass(PantographParameters(masses_kg=(mass,), model="rigid_mass", gravity_m_s2=gravity), dt)
+    section = PantographSection(masses_kg=(mass,), model="rigid_mass", gravity_m_s2=gravity)
+    python = RigidMass(pantograph_parameters(section, 0.0), dt)
     python.settle(0.0)
     expected = [python.step(z) for z in heights]
     m = Master(rig.port)

@@ -187,7 +187,7 @@ def _bad_rig(tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("args,message", [
-    (["--rig", "{bad}", "--case", str(CASE_B)], "--rig: force.filter_order: must be 1 to 8"),
+    (["--rig", "{bad}", "--case", str(CASE_B)], "--rig: force.filter_order: 9 is outside its range [1, 8]"),
     (["--rig", str(RIGS / "paper_d.toml"), "--case", str(CASE_B)], "--rig: the rig runs at dt = 0.002 s"),
     (["--rig", str(RIGS / "paper_b.toml"), "--case", str(CASES_DIR / "paper_b_pantograph_300.toml")],
      "--case: rig-identify mounts the case's rigid mass"),
@@ -221,7 +221,7 @@ def test_the_emulator_refuses_a_bad_rig_file(tmp_path):
     proc = pantohil("rig-emulator", "--listen", "127.0.0.1:0", "--rig", str(_bad_rig(tmp_path)))
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "--rig: force.filter_order: must be 1 to 8" in lines[0]
+    assert len(lines) == 1 and "--rig: force.filter_order: 9 is outside its range [1, 8]" in lines[0]
 
 
 def test_identify_in_process_writes_a_rig_file_the_case_compensates_with(tmp_path):

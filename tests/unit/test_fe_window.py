@@ -9,7 +9,7 @@ from conftest import CATENARIES_DIR as CATENARIES
 from pantohil.models.catenary.fe.definition import load_definition
 from pantohil.models.catenary.fe.model import build_section
 from pantohil.models.catenary.fe.window import WindowLayout, dof_one_span_ahead, simulate_window
-from pantohil.models.pantograph.lumped import PantographParameters
+from pantohil.models.parameters import PantographSection, pantograph_parameters
 
 SPANS = 5
 
@@ -48,7 +48,7 @@ def test_a_moving_window_keeps_the_contact_force_continuous():
     """Two spans of travel in a 6-span window (one move): the force's change at the move is no larger than
     its largest change elsewhere in the span around it, and the force stays in contact."""
     cat = load_definition(CATENARIES / "benchmark_simple.toml")
-    pan = PantographParameters()
+    pan = pantograph_parameters(PantographSection(), 130.0)
     speed, dt = 250 / 3.6, 1e-3
     res = simulate_window(cat, pan, WindowLayout(6, 2), 2, speed, dt)
     per_span = int(round(cat.span_m / (speed * dt)))

@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 from pantohil.models.pantograph.interface import receptance, static_compliance_m_N
-from pantohil.models.pantograph.lumped import ChainPantograph, PantographParameters, RigidMass
+from pantohil.models.pantograph.lumped import ChainPantograph, RigidMass
+from pantohil.models.parameters import PantographSection, pantograph_parameters
 
-PAN = PantographParameters(uplift_force_N=120.0)  # Paper A Table A.3, k_c = 50 kN/m
+PAN = pantograph_parameters(PantographSection(), 120.0)  # Paper A Table A.3, k_c = 50 kN/m
 
 
 def test_static_force_equals_uplift_at_reference_height():
@@ -51,8 +52,8 @@ def test_contact_loss_gives_zero_not_negative_force():
 
 
 def test_rigid_mass_force_is_minus_m_times_acceleration():
-    m = PantographParameters(masses_kg=(5.29,), stiffnesses_N_m=(0.0,), dampings_Ns_m=(0.0,),
-                             model="rigid_mass", gravity_m_s2=9.81)
+    m = pantograph_parameters(PantographSection(masses_kg=(5.29,), stiffnesses_N_m=(0.0,), dampings_Ns_m=(0.0,),
+                                                model="rigid_mass", gravity_m_s2=9.81), 0.0)
     r = RigidMass(m, 1e-3)
     ratio, f = _steady_harmonic(r, 10.0, 1e-3, 1e-3)
     w = 2 * math.pi * 10.0

@@ -13,16 +13,16 @@ from conftest import package_lines_matching
 from pantohil.models.errors import InputError
 from pantohil.models.pantograph.interface import PANTOGRAPHS, SteppedPantograph, pantograph_model
 from pantohil.models.pantograph.lumped import PantographParameters
-from pantohil.models.parameters import PantographSection
+from pantohil.models.parameters import PantographSection, pantograph_parameters
 
 DT_S = 0.001
 
 
 def _params(name: str) -> PantographParameters:
     if PANTOGRAPHS.get(name).fixed_to_actuator:
-        return PantographParameters(masses_kg=(5.29,), stiffnesses_N_m=(0.0,), dampings_Ns_m=(0.0,), model=name,
-                                    gravity_m_s2=9.81)
-    return PantographParameters(model=name)
+        return pantograph_parameters(PantographSection(model=name, masses_kg=(5.29,), stiffnesses_N_m=(0.0,),
+                                                       dampings_Ns_m=(0.0,), gravity_m_s2=9.81), 130.0)
+    return pantograph_parameters(PantographSection(model=name), 130.0)
 
 
 @pytest.mark.parametrize("name", PANTOGRAPHS.names())
@@ -68,7 +68,7 @@ def test_the_case_choices_and_the_fmu_codes_come_from_the_registry():
 
 def test_an_unknown_model_or_code_is_an_input_error_naming_the_key():
     with pytest.raises(InputError, match="pantograph.model: 'spring' is not a pantograph model") as err:
-        pantograph_model(PantographParameters(model="spring"))
+        pantograph_model(dataclasses.replace(_params("chain"), model="spring"))
     assert err.value.key == "pantograph.model"
     with pytest.raises(InputError, match="code 99"):
         PANTOGRAPHS.name_of(99, "pantograph_model")

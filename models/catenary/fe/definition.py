@@ -15,6 +15,7 @@ import numpy as np
 
 from pantohil.models.errors import InputError
 from pantohil.models.input_files import InputFileError, load_toml
+from pantohil.models.schema import REQUIRED, FileSchema, param
 
 
 class CatenaryError(InputError):
@@ -76,35 +77,98 @@ class CatenaryDefinition:
         return x < half or x > self.span_m - half
 
 
-_SCHEMA = {
-    "catenary": {"name", "description", "span_m", "encumbrance_m", "contact_height_m", "presag_m", "presag_between",
-                 "dropper_spacing_m", "dropper_positions_m", "mesh_size_m", "alpha_1_s", "beta_s"},
-    "contact_wire": {"tension_N", "density_kg_m3", "area_m2", "linear_mass_kg_m", "youngs_modulus_Pa",
-                     "second_moment_m4", "bending_stiffness_N_m2"},
-    "messenger_wire": {"tension_N", "density_kg_m3", "area_m2", "linear_mass_kg_m", "youngs_modulus_Pa",
-                       "second_moment_m4", "bending_stiffness_N_m2"},
-    "stitch_wire": {"length_m", "tension_N", "density_kg_m3", "area_m2", "linear_mass_kg_m", "youngs_modulus_Pa",
-                    "second_moment_m4", "bending_stiffness_N_m2"},
-    "droppers": {"density_kg_m3", "area_m2", "linear_mass_kg_m", "youngs_modulus_Pa", "clamp_mass_messenger_kg",
-                 "clamp_mass_contact_kg"},
-    "steady_arm": {"mass_kg", "stiffness_N_m"},
-    "messenger_support": {"type", "stiffness_N_m"},
-}
-
-
-# Stated physical ranges of catenary-file keys (upper bounds; lower bounds are given where read).
-UPPER_BOUNDS = {
-    "span_m": 1000.0, "encumbrance_m": 10.0, "presag_m": 10.0, "mesh_size_m": 10.0, "length_m": 1000.0,
-    "tension_N": 1e6, "linear_mass_kg_m": 100.0, "density_kg_m3": 1e5, "area_m2": 0.01, "youngs_modulus_Pa": 1e13,
-    "second_moment_m4": 1e-3, "bending_stiffness_N_m2": 1e6, "clamp_mass_messenger_kg": 100.0,
-    "clamp_mass_contact_kg": 100.0, "mass_kg": 1000.0, "stiffness_N_m": 1e9, "alpha_1_s": 100.0, "beta_s": 1.0,
-}
 MIN_MESH_SIZE_M = 0.05
 MAX_DROPPERS = 100
 # Elements of a wire in one span (span_m / mesh_size_m). The static stiffness solve of the analysis holds a
 # dense block of (4 dofs x 5 spans x E) x E float64 numbers, twice: 0.3 GiB at the limit, 120 GiB at the
 # documented extremes (a 1000 m span in 0.05 m elements); the shipped catenaries have 220 and 260.
 MAX_ELEMENTS_PER_SPAN = 1000
+
+
+@dataclass(frozen=True)
+class SpanSection:
+    """[catenary]: the span, its droppers, the contact wire's pre-sag, the mesh and the damping."""
+
+    name: str = param("", "1", "catenary name (empty: the file's name)")
+    description: str = param("", "1", "free text")
+    span_m: float = param(REQUIRED, "m", "span length", 0.0, 1000.0, low_open=True)
+    encumbrance_m: float = param(REQUIRED, "m", "height of the messenger above the contact wire at the supports",
+                                 0.0, 10.0, low_open=True)
+    presag_m: float = param(0.0, "m", "contact-wire pre-sag at mid-span (negative: hogging)", -10.0, 10.0)
+    presag_between: str = param("supports", "1", "the pre-sag parabola runs between the supports, or between the "
+                                                 "first and last droppers (level outside them)",
+                                choices=("supports", "end_droppers"))
+    dropper_spacing_m: tuple = param(None, "m", "intervals support-1, 1-2, ..., n-support, summing to the span "
+                                                "(or dropper_positions_m)", 0.0, 1000.0, low_open=True,
+                                     max_items=MAX_DROPPERS + 1)
+    dropper_positions_m: tuple = param(None, "m", "dropper positions from the span's first support, increasing "
+                                                  "(or dropper_spacing_m)", 0.0, 1000.0, low_open=True,
+                                       max_items=MAX_DROPPERS)
+    mesh_size_m: float = param(0.25, "m", "element length, at most the shortest dropper interval", MIN_MESH_SIZE_M,
+                               10.0)
+    alpha_1_s: float = param(0.0125, "1/s", "Rayleigh alpha", 0.0, 100.0)
+    beta_s: float = param(1e-4, "s", "Rayleigh beta", 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class WireSection:
+    """[contact_wire], [messenger_wire]: a tensioned wire; its mass as linear_mass_kg_m or density_kg_m3 x
+    area_m2, its bending stiffness as bending_stiffness_N_m2 or youngs_modulus_Pa x second_moment_m4."""
+
+    tension_N: float = param(REQUIRED, "N", "tension", 0.0, 1e6, low_open=True)
+    linear_mass_kg_m: float = param(None, "kg/m", "mass per length", 0.0, 100.0, low_open=True)
+    density_kg_m3: float = param(None, "kg/m3", "density (with area_m2)", 0.0, 1e5, low_open=True)
+    area_m2: float = param(None, "m2", "cross-section (with density_kg_m3)", 0.0, 0.01, low_open=True)
+    bending_stiffness_N_m2: float = param(None, "N.m2", "bending stiffness EI", 0.0, 1e6)
+    youngs_modulus_Pa: float = param(0.0, "Pa", "Young's modulus (with second_moment_m4)", 0.0, 1e13)
+    second_moment_m4: float = param(0.0, "m4", "second moment of area (with youngs_modulus_Pa)", 0.0, 1e-3)
+
+
+@dataclass(frozen=True)
+class StitchWireSection(WireSection):
+    """[stitch_wire] (optional): the stitch wire at each support, as a wire, with its length; the droppers
+    within half its length of a support hang from it."""
+
+    length_m: float = param(REQUIRED, "m", "stitch-wire length, shorter than the span", 0.0, 1000.0, low_open=True)
+
+
+@dataclass(frozen=True)
+class DroppersSection:
+    """[droppers]: the droppers' wire and clamps; mass as linear_mass_kg_m or density_kg_m3 x area_m2."""
+
+    linear_mass_kg_m: float = param(None, "kg/m", "mass per length", 0.0, 100.0, low_open=True)
+    density_kg_m3: float = param(None, "kg/m3", "density (with area_m2)", 0.0, 1e5, low_open=True)
+    area_m2: float = param(10e-6, "m2", "cross-section, for the axial stiffness E A (and the mass with "
+                                        "density_kg_m3)", 0.0, 0.01, low_open=True)
+    youngs_modulus_Pa: float = param(1.1e11, "Pa", "Young's modulus, for the axial stiffness E A", 0.0, 1e13,
+                                     low_open=True)
+    clamp_mass_messenger_kg: float = param(0.0, "kg", "clamp mass on the messenger", 0.0, 100.0)
+    clamp_mass_contact_kg: float = param(0.0, "kg", "clamp mass on the contact wire", 0.0, 100.0)
+
+
+@dataclass(frozen=True)
+class SteadyArmSection:
+    """[steady_arm] (optional): the mass and vertical stiffness of the steady arm at each support."""
+
+    mass_kg: float = param(0.0, "kg", "steady-arm mass on the contact wire", 0.0, 1000.0)
+    stiffness_N_m: float = param(0.0, "N/m", "vertical stiffness", 0.0, 1e9)
+
+
+@dataclass(frozen=True)
+class MessengerSupportSection:
+    """[messenger_support] (optional): how the messenger wire is held at the supports."""
+
+    type: str = param("fixed", "1", "fixed, or a vertical spring", choices=("fixed", "spring"))
+    stiffness_N_m: float = param(None, "N/m", "the spring's stiffness (type = \"spring\")", 0.0, 1e9, low_open=True)
+
+
+CATENARY_FILE = FileSchema(
+    "catenary file",
+    {"catenary": SpanSection, "contact_wire": WireSection, "messenger_wire": WireSection,
+     "stitch_wire": StitchWireSection, "droppers": DroppersSection, "steady_arm": SteadyArmSection,
+     "messenger_support": MessengerSupportSection},
+    CatenaryError, required_sections=("catenary", "contact_wire", "messenger_wire", "droppers"),
+    optional_sections=("stitch_wire",), reference="catenary-reference")
 
 
 def _check_elements(span: float, mesh: float) -> None:
@@ -117,148 +181,102 @@ def _check_elements(span: float, mesh: float) -> None:
                             f"(the stiffness solve would take {gib:.1f} GiB)")
 
 
-def _num(section: dict, sec: str, key: str, default=None, positive=False, nonneg=False) -> float:
-    if key not in section:
-        if default is None:
-            raise CatenaryError(f"{sec}.{key}: missing (required)")
-        return default
-    v = section[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise CatenaryError(f"{sec}.{key}: expected a finite number, got {v!r}")
-    if positive and v <= 0:
-        raise CatenaryError(f"{sec}.{key}: must be > 0 (got {v!r})")
-    if nonneg and v < 0:
-        raise CatenaryError(f"{sec}.{key}: must be >= 0 (got {v!r})")
-    high = UPPER_BOUNDS.get(key)
-    if high is not None and abs(v) > high:
-        raise CatenaryError(f"{sec}.{key}: {v:g} is beyond the physical range of a catenary (|value| <= {high:g})")
-    return float(v)
-
-
 def _number_list(c: dict, key: str, minimum: int) -> list[float]:
     values = c[key]
-    if (not isinstance(values, list) or len(values) < minimum
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)):
-        raise CatenaryError(f"catenary.{key}: expected a list of at least {minimum} finite numbers [m]")
-    if len(values) > MAX_DROPPERS + 1:
-        raise CatenaryError(f"catenary.{key}: {len(values)} values, above the limit of {MAX_DROPPERS} droppers")
-    return [float(v) for v in values]
+    if len(values) < minimum:
+        raise CatenaryError(f"catenary.{key}: expected a list of at least {minimum} numbers [m]", key=f"catenary.{key}")
+    return values
 
 
-def _wire(raw: dict, sec: str) -> Wire:
-    s = raw[sec]
-    tension = _num(s, sec, "tension_N", positive=True)
-    if "linear_mass_kg_m" in s:
-        mass = _num(s, sec, "linear_mass_kg_m", positive=True)
-    elif "density_kg_m3" in s or "area_m2" in s:
-        mass = _num(s, sec, "density_kg_m3", positive=True) * _num(s, sec, "area_m2", positive=True)
-    else:
-        raise CatenaryError(f"{sec}.linear_mass_kg_m: missing (or give density_kg_m3 and area_m2)")
-    if "bending_stiffness_N_m2" in s:
-        ei = _num(s, sec, "bending_stiffness_N_m2", nonneg=True)
-    else:
-        ei = _num(s, sec, "youngs_modulus_Pa", 0.0, nonneg=True) * _num(s, sec, "second_moment_m4", 0.0, nonneg=True)
-    return Wire(tension, mass, ei)
+def _mass(s: dict, sec: str) -> float:
+    """A wire's or the droppers' mass per length: given, or density x area."""
+    if s["linear_mass_kg_m"] is not None:
+        return s["linear_mass_kg_m"]
+    if s["density_kg_m3"] is None or s["area_m2"] is None:
+        raise CatenaryError(f"{sec}.linear_mass_kg_m: missing (or give density_kg_m3 and area_m2)",
+                            key=f"{sec}.linear_mass_kg_m")
+    return s["density_kg_m3"] * s["area_m2"]
 
 
-def _presag_span(c: dict) -> str:
-    v = c.get("presag_between", "supports")
-    if v not in ("supports", "end_droppers"):
-        raise CatenaryError(f"catenary.presag_between: must be \"supports\" or \"end_droppers\" (got {v!r})")
-    return v
-
-
-def _check_sections(raw: dict) -> None:
-    """Every section and key known, the four required sections present."""
-    for sec, body in raw.items():
-        if sec not in _SCHEMA:
-            raise CatenaryError(f"{sec}: unknown section (known: {', '.join(_SCHEMA)})")
-        if not isinstance(body, dict):
-            raise CatenaryError(f"{sec}: expected a table of keys")
-        for key in body:
-            if key not in _SCHEMA[sec]:
-                raise CatenaryError(f"{sec}.{key}: unknown key (known: {', '.join(sorted(_SCHEMA[sec]))})")
-    for sec in ("catenary", "contact_wire", "messenger_wire", "droppers"):
-        if sec not in raw:
-            raise CatenaryError(f"{sec}: missing section")
+def _wire(s: dict, sec: str) -> Wire:
+    ei = s["bending_stiffness_N_m2"]
+    if ei is None:
+        ei = s["youngs_modulus_Pa"] * s["second_moment_m4"]
+    return Wire(s["tension_N"], _mass(s, sec), ei)
 
 
 def _dropper_positions(c: dict, span: float) -> tuple[float, ...]:
     """Dropper positions from the span's first support, from `dropper_spacing_m` or `dropper_positions_m`."""
-    if "dropper_positions_m" in c and "dropper_spacing_m" in c:
-        raise CatenaryError("catenary.dropper_positions_m: give either dropper_positions_m or dropper_spacing_m")
-    if "dropper_spacing_m" in c:
-        spacing = _number_list(c, "dropper_spacing_m", 2)
-        if any(v <= 0 for v in spacing):
-            raise CatenaryError("catenary.dropper_spacing_m: overlapping droppers (an interval <= 0)")
+    spacing, given = c["dropper_spacing_m"], c["dropper_positions_m"]
+    if spacing is not None and given is not None:
+        raise CatenaryError("catenary.dropper_positions_m: give either dropper_positions_m or dropper_spacing_m",
+                            key="catenary.dropper_positions_m")
+    if spacing is not None:
+        _number_list(c, "dropper_spacing_m", 2)
         if abs(sum(spacing) - span) > 1e-6 * span:
-            raise CatenaryError(
-                f"catenary.dropper_spacing_m: intervals sum to {sum(spacing):g} m, not the span {span:g} m"
-            )
-        positions = tuple(float(v) for v in np.cumsum(spacing)[:-1])
-    elif "dropper_positions_m" in c:
-        positions = tuple(_number_list(c, "dropper_positions_m", 1))
-        if any(p <= 0 or p >= span for p in positions):
-            raise CatenaryError(f"catenary.dropper_positions_m: a dropper outside the span (0, {span:g}) m")
-        if any(b <= a for a, b in zip(positions, positions[1:], strict=False)):
-            raise CatenaryError("catenary.dropper_positions_m: overlapping droppers (positions must increase)")
-    else:
-        raise CatenaryError("catenary.dropper_spacing_m: missing (or give dropper_positions_m)")
+            raise CatenaryError(f"catenary.dropper_spacing_m: intervals sum to {sum(spacing):g} m, not the span "
+                                f"{span:g} m", key="catenary.dropper_spacing_m")
+        return tuple(float(v) for v in np.cumsum(spacing)[:-1])
+    if given is None:
+        raise CatenaryError("catenary.dropper_spacing_m: missing (or give dropper_positions_m)",
+                            key="catenary.dropper_spacing_m")
+    positions = tuple(_number_list(c, "dropper_positions_m", 1))
+    if any(x >= span for x in positions):
+        raise CatenaryError(f"catenary.dropper_positions_m: a dropper outside the span (0, {span:g}) m",
+                            key="catenary.dropper_positions_m")
+    if any(b <= a for a, b in zip(positions, positions[1:], strict=False)):
+        raise CatenaryError("catenary.dropper_positions_m: overlapping droppers (positions must increase)",
+                            key="catenary.dropper_positions_m")
     return positions
 
 
-def _stitch(raw: dict, span: float) -> tuple[Wire | None, float]:
+def _stitch(v: dict, span: float) -> tuple[Wire | None, float]:
     """The stitch wire and its length, or (None, 0) without one."""
-    if "stitch_wire" not in raw:
+    s = v["stitch_wire"]
+    if s is None:
         return None, 0.0
-    stitch = _wire(raw, "stitch_wire")
-    stitch_len = _num(raw["stitch_wire"], "stitch_wire", "length_m", positive=True)
-    if stitch_len >= span:
-        raise CatenaryError(f"stitch_wire.length_m: must be shorter than the span ({span:g} m)")
-    return stitch, stitch_len
+    if s["length_m"] >= span:
+        raise CatenaryError(f"stitch_wire.length_m: must be shorter than the span ({span:g} m)",
+                            key="stitch_wire.length_m")
+    return _wire(s, "stitch_wire"), s["length_m"]
+
+
+def _support_stiffness(ms: dict) -> float:
+    """The messenger support's vertical stiffness (0: fixed)."""
+    if ms["type"] == "fixed":
+        return 0.0
+    if ms["stiffness_N_m"] is None:
+        raise CatenaryError("messenger_support.stiffness_N_m: missing (required with type = \"spring\")",
+                            key="messenger_support.stiffness_N_m")
+    return ms["stiffness_N_m"]
+
+
+def _check_mesh(mesh: float, span: float, positions: tuple[float, ...]) -> None:
+    _check_elements(span, mesh)
+    if mesh > min(np.diff((0.0, *positions, span))):
+        raise CatenaryError(f"catenary.mesh_size_m: {mesh:g} m is longer than the shortest dropper interval",
+                            key="catenary.mesh_size_m")
 
 
 def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinition:
-    """A catenary definition from the parsed TOML of a catenary file; CatenaryError naming the key."""
-    _check_sections(raw)
-    c = raw["catenary"]
-    span = _num(c, "catenary", "span_m", positive=True)
+    """A catenary definition from the parsed TOML of a catenary file (its keys: CATENARY_FILE,
+    docs/catenary-reference.md); CatenaryError naming the key."""
+    v = CATENARY_FILE.validate(raw)
+    c, d, sa = v["catenary"], v["droppers"], v["steady_arm"]
+    span = c["span_m"]
     positions = _dropper_positions(c, span)
-    d = raw["droppers"]
-    if "linear_mass_kg_m" in d:
-        dmass = _num(d, "droppers", "linear_mass_kg_m", positive=True)
-    else:
-        dmass = _num(d, "droppers", "density_kg_m3", positive=True) * _num(d, "droppers", "area_m2", positive=True)
-    ea = _num(d, "droppers", "youngs_modulus_Pa", 1.1e11, positive=True) * _num(
-        d, "droppers", "area_m2", 10e-6, positive=True
-    )
-    stitch, stitch_len = _stitch(raw, span)
-    sa = raw.get("steady_arm", {})
-    ms = raw.get("messenger_support", {})
-    support_type = ms.get("type", "fixed")
-    if support_type not in ("fixed", "spring"):
-        raise CatenaryError(f"messenger_support.type: must be \"fixed\" or \"spring\" (got {support_type!r})")
-    k_support = _num(ms, "messenger_support", "stiffness_N_m", positive=True) if support_type == "spring" else 0.0
-    mesh = _num(c, "catenary", "mesh_size_m", 0.25, positive=True)
-    if mesh < MIN_MESH_SIZE_M:
-        raise CatenaryError(f"catenary.mesh_size_m: {mesh:g} m is below the limit of {MIN_MESH_SIZE_M:g} m")
-    _check_elements(span, mesh)
-    if mesh > min(np.diff((0.0, *positions, span))):
-        raise CatenaryError(f"catenary.mesh_size_m: {mesh:g} m is longer than the shortest dropper interval")
+    _check_mesh(c["mesh_size_m"], span, positions)
+    stitch, stitch_len = _stitch(v, span)
     return CatenaryDefinition(
-        name=str(c.get("name", source.stem if source else "catenary")), source=source, span_m=span,
-        encumbrance_m=_num(c, "catenary", "encumbrance_m", positive=True),
-        presag_m=_num(c, "catenary", "presag_m", 0.0), dropper_positions_m=positions,
-        presag_span=_presag_span(c),
-        contact=_wire(raw, "contact_wire"), messenger=_wire(raw, "messenger_wire"), stitch=stitch,
-        stitch_length_m=stitch_len, dropper_mass_kg_m=dmass, dropper_axial_stiffness_N=ea,
-        clamp_mass_messenger_kg=_num(d, "droppers", "clamp_mass_messenger_kg", 0.0, nonneg=True),
-        clamp_mass_contact_kg=_num(d, "droppers", "clamp_mass_contact_kg", 0.0, nonneg=True),
-        steady_arm_mass_kg=_num(sa, "steady_arm", "mass_kg", 0.0, nonneg=True),
-        steady_arm_stiffness_N_m=_num(sa, "steady_arm", "stiffness_N_m", 0.0, nonneg=True),
-        messenger_support_stiffness_N_m=k_support,
-        alpha_1_s=_num(c, "catenary", "alpha_1_s", 0.0125, nonneg=True),
-        beta_s=_num(c, "catenary", "beta_s", 1e-4, nonneg=True), mesh_size_m=mesh, values=raw)
+        name=c["name"] or (source.stem if source else "catenary"), source=source, span_m=span,
+        encumbrance_m=c["encumbrance_m"], presag_m=c["presag_m"], dropper_positions_m=positions,
+        presag_span=c["presag_between"], contact=_wire(v["contact_wire"], "contact_wire"),
+        messenger=_wire(v["messenger_wire"], "messenger_wire"), stitch=stitch, stitch_length_m=stitch_len,
+        dropper_mass_kg_m=_mass(d, "droppers"), dropper_axial_stiffness_N=d["youngs_modulus_Pa"] * d["area_m2"],
+        clamp_mass_messenger_kg=d["clamp_mass_messenger_kg"], clamp_mass_contact_kg=d["clamp_mass_contact_kg"],
+        steady_arm_mass_kg=sa["mass_kg"], steady_arm_stiffness_N_m=sa["stiffness_N_m"],
+        messenger_support_stiffness_N_m=_support_stiffness(v["messenger_support"]),
+        alpha_1_s=c["alpha_1_s"], beta_s=c["beta_s"], mesh_size_m=c["mesh_size_m"], values=raw)
 
 
 def load_definition(path: Path) -> CatenaryDefinition:
