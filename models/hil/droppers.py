@@ -12,7 +12,7 @@ from dataclasses import replace
 import numpy as np
 
 from pantohil.models.hil.loop import UPDATES, HilSettings, commands_ahead, hold
-from pantohil.models.catenary.pfem.operators import PfemOperators
+from pantohil.models.catenary.pfem.operator_data import PfemOperators
 from pantohil.models.catenary.receptance import reduce_harmonics
 
 

@@ -14,6 +14,7 @@ from pantohil.models.catenary.asm.string import AsmParameters, receptance_direct
 from pantohil.models.catenary.grid import SpanGrid
 from pantohil.models.catenary.profile import read_profile_csv, write_profile_csv
 from pantohil.models.catenary.receptance import CirculantOperator, asm_operator, reduce_harmonics
+from pantohil.models.hil.loop import PeriodicHil
 
 PROFILE_FILE = "profile.csv"
 ASM_FIELDS = tuple(f.name for f in fields(AsmParameters))  # case keys of [catenary] = FMU parameters
@@ -56,8 +57,6 @@ class AsmModel:
 
     def iteration(self, grid: SpanGrid, parameters: Mapping[str, object], resources: Path, settings, compensation):
         """PeriodicHil on I_cc of ASM2 (compensated: I B, Paper D eq. 10)."""
-        from pantohil.models.hil.loop import PeriodicHil
-
         cat = AsmParameters(**{f: float(parameters[f]) for f in ASM_FIELDS})
         z0 = staged_profile(grid, resources)
         op = asm_operator(cat, grid.speed_m_s, grid.samples_per_span, grid.dt_s, grid.n_harmonics)

@@ -1,6 +1,10 @@
 """The PFEM as a registered catenary model (`[catenary] model = "pfem"`, Papers C-D): one span of the case's
 catenary file with periodic boundaries, its operators built once and cached (operator_cache.py), staged as
-operators.npz, and the HIL iteration with dropper slackening on them (models/hil/droppers.py)."""
+operators.npz, and the HIL iteration with dropper slackening on them (models/hil/droppers.py).
+
+What the iteration needs is imported with this module, not where the iteration is built: the catenary FMU builds
+it after its import, when a function-level import would find whatever pantohil the process holds, not the FMU's
+own (fmus/own_package.py). What only a case's checks, staging and stability maps need is imported where used."""
 from __future__ import annotations
 
 import math
@@ -8,7 +12,9 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from pantohil.models.catenary.grid import SpanGrid
+from pantohil.models.catenary.pfem.operator_file import load_operators
 from pantohil.models.errors import InputError
+from pantohil.models.hil.droppers import PfemHil
 
 OPERATOR_FILE = "operators.npz"
 MAX_DROPPERS = 12  # the dropper outputs the catenary FMU declares
@@ -58,10 +64,6 @@ class PfemModel:
 
     def iteration(self, grid: SpanGrid, parameters: Mapping[str, object], resources: Path, settings, compensation):
         """PfemHil on the staged operators, which must be of this grid (Paper C eqs. 34-40, Paper D eqs. 11-12)."""
-        from pantohil.models.hil.droppers import PfemHil
-
-        from .operator_file import load_operators
-
         ops = load_operators(Path(resources) / OPERATOR_FILE)
         s = ops.settings
         if (s.samples_per_span != grid.samples_per_span or abs(s.dt_s - grid.dt_s) > 1e-12
@@ -90,7 +92,6 @@ class PfemModel:
         from pantohil.models.catenary.receptance import reduce_harmonics
 
         from .operator_cache import case_operators
-        from .operator_file import load_operators
 
         if n_harmonics > case.n_harmonics:
             raise InputError(f"f_max: {n_harmonics} harmonics needed; this PFEM case's operators keep "

@@ -20,7 +20,7 @@ from pantohil.models.catenary.fe import model as fe_model
 from pantohil.models.catenary.pfem import blocks as pfem_blocks
 from pantohil.models.catenary.pfem import frf as pfem_frf
 from pantohil.models.catenary.pfem import lag_transform as pfem_lag_transform
-from pantohil.models.catenary.pfem import operator_file
+from pantohil.models.catenary.pfem import operator_data, operator_file
 from pantohil.models.catenary.pfem import operators as pfem_operators
 from pantohil.models.catenary.fe.definition import load_definition
 from pantohil.models.catenary.pfem.operator_file import FORMAT_VERSION, load_operators, save_operators
@@ -31,7 +31,8 @@ from pantohil.models.storage import cache_root
 Case = Any  # a validated case (models/case.py), which imports the catenary models
 
 
-SOURCES = (pfem_frf, pfem_lag_transform, pfem_blocks, pfem_operators, fe_model, catenary_definition, operator_file)
+SOURCES = (pfem_frf, pfem_lag_transform, pfem_blocks, pfem_operators, operator_data, fe_model, catenary_definition,
+           operator_file)
 
 
 @dataclass

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pantohil.models.catenary.pfem.operators import PfemOperators, PfemSettings
+from pantohil.models.catenary.pfem.operator_data import PfemOperators, PfemSettings
 from pantohil.models.errors import InputError
 from pantohil.models.input_files import InputFileError, open_regular
 from pantohil.models.storage import atomic_path, cache_folder

@@ -31,7 +31,7 @@ computed as one Toeplitz kernel per dropper pair and then reduced column by colu
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft as sfft
@@ -39,60 +39,9 @@ import scipy.fft as sfft
 from pantohil.models.catenary.pfem.frf import FixedInterfaceModel, frequency_grid, graded_grid, transform_weights
 from pantohil.models.catenary.pfem.blocks import ContactBlock
 from pantohil.models.catenary.pfem.lag_transform import LagTransform
+from pantohil.models.catenary.pfem.operator_data import PfemOperators, PfemSettings
 
 NUMERICS_VERSION = 2  # part of the operator cache key: bump when the operators' numbers change
-
-
-@dataclass(frozen=True)
-class PfemSettings:
-    """Discretisation of the operators (Paper C sec. 6: dw = 0.025 rad/s, w_max = 750 rad/s)."""
-
-    speed_m_s: float
-    dt_s: float
-    samples_per_span: int
-    n_harmonics: int  # N_h: harmonics 0..N_h-1 kept in the contact height
-    n_harmonics_dropper: int  # N_hd: harmonics kept in the dropper elongations
-    omega_max: float = 750.0
-    grid: str = "graded"  # "graded": dw = resolution (alpha + beta w^2); "uniform": dw = d_omega
-    resolution: float = 0.094
-    d_omega: float = 0.025
-    max_step_rad_s: float = 0.5
-    taper: float = 0.25  # fraction of [0, w_max] over which the transform is tapered to zero
-
-
-@dataclass
-class PfemOperators:
-    """Operators stored by the column the HIL step uses, so that each update reads contiguous memory.
-
-    cc[m]          : height at every sample n per unit contact force at sample m (N x N)
-    dc[m, d]       : harmonics 0..N_hd-1 (over the window index) of the elongation of dropper d per
-                     unit contact force at m (N x N_d x N_hd, complex, rfft convention)
-    cd[m, d]       : height at every n per unit correction of dropper d at the instant of phase m
-    dd[d, i, e]    : harmonics of the elongation of dropper e per unit correction of dropper d at its
-                     window index i (N_d x N x N_d x N_hd, complex)
-    """
-
-    settings: PfemSettings
-    cc: np.ndarray
-    dc: np.ndarray
-    cd: np.ndarray
-    dd: np.ndarray
-    z0: np.ndarray  # static contact-point height at the N samples, unreduced
-    window_start: np.ndarray  # first instant of each dropper's window (may be negative)
-    dropper_tension_N: np.ndarray
-    dropper_stiffness_N_m: np.ndarray
-    dropper_x_m: np.ndarray
-    info: dict = field(default_factory=dict)
-
-    @property
-    def n(self) -> int:
-        """Number of contact samples N of the block."""
-        return self.cc.shape[0]
-
-    @property
-    def n_droppers(self) -> int:
-        """Number of droppers of the block."""
-        return len(self.dropper_x_m)
 
 
 def dropper_windows(x_m: np.ndarray, speed_m_s: float, dt_s: float, n: int) -> np.ndarray:
