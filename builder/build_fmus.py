@@ -41,6 +41,7 @@ SCRIPTS = {name: FMUS_DIR / f"pantohil_{name}.py" for name in (*FMU_NAMES, "adap
 CLASS_NAMES = {"catenary": "PantohilCatenary", "rig": "PantohilRig", "pantograph": "PantohilPantograph",
                "adapter": "PantohilAdapter"}
 SUPPORT_MODULES = ("__init__.py", "fmu_support.py", "state_codec.py", "udp_protocol.py", "link_client.py")
+BINDING = "own_package.py"  # beside the FMU's script in resources/: binds it to the FMU's own copy of the package
 
 
 def fmu_parameters(case: Case, delay_steps: int,
@@ -69,13 +70,15 @@ def default_delay_steps(case: Case) -> int:
 
 
 def _stage(name: str, params: dict, case: Case, stage: Path) -> list[Path]:
-    """Write the project files an FMU carries in resources/: the model package and the case data."""
+    """Write the project files an FMU carries in resources/: the model package, the module that binds the FMU's
+    script to it (fmus/own_package.py) and the case data."""
     pkg = stage / "pantohil"
     shutil.copytree(MODELS_DIR, pkg / "models", ignore=shutil.ignore_patterns("__pycache__", "*.toml"))
     (pkg / "fmus").mkdir()
     for f in SUPPORT_MODULES:
         shutil.copy2(FMUS_DIR / f, pkg / "fmus" / f)
-    return [pkg, *stage_case_data(name, params, case, stage)]
+    shutil.copy2(FMUS_DIR / BINDING, stage / BINDING)
+    return [pkg, stage / BINDING, *stage_case_data(name, params, case, stage)]
 
 
 def stage_case_data(name: str, params: dict, case: Case, stage: Path, link: bool = False) -> list[Path]:

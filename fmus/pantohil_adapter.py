@@ -8,14 +8,23 @@ and session bookkeeping; its socket is shared with the live instance (`constants
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import math
+from pathlib import Path
 
-from pantohil.fmus import udp_protocol as proto
-from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
-from pantohil.fmus.link_client import (COUNTERS, REFUSED_HORIZON, REFUSED_LATENCY, RIG_PACED_COUNTERS,
-                                       TICK_COUNTS, LinkClient, LinkConfig)
-from pantohil.models.hil.loop import MAX_HORIZON_STEPS
-from pantohil.models.rig.actuator import ActuatorLimits
+# pythonfmu imports this script from the FMU's resources/: its pantohil imports are the FMU's own copy of the
+# package there, whatever pantohil the process holds (fmus/own_package.py, loaded by its path from beside this file)
+_spec = importlib.util.spec_from_file_location("pantohil_own_package", Path(__file__).with_name("own_package.py"))
+_binding = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_binding)
+
+with _binding.own_package(globals()):
+    from pantohil.fmus import udp_protocol as proto
+    from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
+    from pantohil.fmus.link_client import (COUNTERS, REFUSED_HORIZON, REFUSED_LATENCY, RIG_PACED_COUNTERS,
+                                           TICK_COUNTS, LinkClient, LinkConfig)
+    from pantohil.models.hil.loop import MAX_HORIZON_STEPS
+    from pantohil.models.rig.actuator import ActuatorLimits
 
 PACED_BY_RIG = proto.PACED_BY_RIG
 

@@ -5,16 +5,25 @@ analytical string (Papers A-B), the PFEM, one span of a finite-element catenary 
 and dropper slackening (Papers C-D), or another package's; built from what it staged in resources/."""
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 
 import numpy as np
-from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
-from pantohil.models.catenary.grid import SpanGrid
-from pantohil.models.catenary.interface import CATENARIES
-from pantohil.models.catenary.pfem.model import MAX_DROPPERS
-from pantohil.models.catenary.receptance import harmonic_count
-from pantohil.models.hil.loop import MAX_HORIZON_STEPS, UPDATES, HilSettings
-from pantohil.models.rig.compensation import read_response_csv
+
+# pythonfmu imports this script from the FMU's resources/: its pantohil imports are the FMU's own copy of the
+# package there, whatever pantohil the process holds (fmus/own_package.py, loaded by its path from beside this file)
+_spec = importlib.util.spec_from_file_location("pantohil_own_package", Path(__file__).with_name("own_package.py"))
+_binding = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_binding)
+
+with _binding.own_package(globals()):
+    from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
+    from pantohil.models.catenary.grid import SpanGrid
+    from pantohil.models.catenary.interface import CATENARIES
+    from pantohil.models.catenary.pfem.model import MAX_DROPPERS
+    from pantohil.models.catenary.receptance import harmonic_count
+    from pantohil.models.hil.loop import MAX_HORIZON_STEPS, UPDATES, HilSettings
+    from pantohil.models.rig.compensation import read_response_csv
 
 _NO_DROPPERS = np.zeros(0)  # the dropper outputs of a catenary without slackening, read every step (never written)
 

@@ -2,9 +2,19 @@
 or a rigid mass on the actuator (Paper A sec. 2, Paper B sec. 5.1)."""
 from __future__ import annotations
 
-from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
-from pantohil.models.pantograph.interface import PANTOGRAPHS, make_pantograph
-from pantohil.models.pantograph.lumped import PantographParameters
+import importlib.util
+from pathlib import Path
+
+# pythonfmu imports this script from the FMU's resources/: its pantohil imports are the FMU's own copy of the
+# package there, whatever pantohil the process holds (fmus/own_package.py, loaded by its path from beside this file)
+_spec = importlib.util.spec_from_file_location("pantohil_own_package", Path(__file__).with_name("own_package.py"))
+_binding = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_binding)
+
+with _binding.own_package(globals()):
+    from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
+    from pantohil.models.pantograph.interface import PANTOGRAPHS, make_pantograph
+    from pantohil.models.pantograph.lumped import PantographParameters
 
 VARIABLES = [
     *case_variables("pantograph"),

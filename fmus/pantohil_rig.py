@@ -5,12 +5,20 @@ loop, Butterworth amplifier filter), the same file the rig emulator runs."""
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 from pathlib import Path
 
-from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
-from pantohil.models.rig.chain import Rig, RigParameters
-from pantohil.models.rig.drive_chain import RigChain, latency_steps
-from pantohil.models.rig.rig_file import load_rig_file
+# pythonfmu imports this script from the FMU's resources/: its pantohil imports are the FMU's own copy of the
+# package there, whatever pantohil the process holds (fmus/own_package.py, loaded by its path from beside this file)
+_spec = importlib.util.spec_from_file_location("pantohil_own_package", Path(__file__).with_name("own_package.py"))
+_binding = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_binding)
+
+with _binding.own_package(globals()):
+    from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
+    from pantohil.models.rig.chain import Rig, RigParameters
+    from pantohil.models.rig.drive_chain import RigChain, latency_steps
+    from pantohil.models.rig.rig_file import load_rig_file
 
 RIG_FILE = "rig.toml"
 

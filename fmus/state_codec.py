@@ -7,6 +7,8 @@ JSON; arrays as base64 of their bytes with dtype and shape. Reading it creates o
 calling any code of theirs: an instance is made by `object.__new__` of a class that is already
 loaded from a `pantohil.` module, and its attributes are set from the data. No other class, no
 function and no module import can be named, so a crafted state cannot run anything (unlike pickle).
+The class is looked up in this module's own copy of the package (an FMU's, in an FMU: fmus/own_package.py),
+not in sys.modules, where another pantohil may be.
 
 Objects shared inside a state stay shared (the first occurrence carries an id, later ones refer to
 it), and objects named in `constants` are written as their name and taken from the instance that
@@ -16,11 +18,12 @@ from __future__ import annotations
 
 import base64
 import json
-import sys
 from collections import OrderedDict, deque
+from types import ModuleType
 
 import numpy as np
 
+import pantohil  # this copy of the package: the classes a state names are its own
 from pantohil.models.errors import InputError
 
 FORMAT = b"pantohil-fmu-state 2\n"
@@ -181,10 +184,23 @@ def _generator(state) -> np.random.Generator:
     return gen
 
 
+def _loaded_module(name: str) -> ModuleType | None:
+    """The module `name` of this copy of pantohil if it is loaded, else None: found through the package's
+    attributes (vars(), so that no module __getattr__ runs and nothing is imported)."""
+    if not name.startswith(_OWN_PACKAGE):
+        return None
+    module = pantohil
+    for part in name.split(".")[1:]:
+        module = vars(module).get(part)
+        if not isinstance(module, ModuleType):
+            return None
+    return module if module.__name__ == name else None
+
+
 def _own_class(path: str) -> type:
     """A class of a pantohil module that is already loaded (nothing is imported, nothing else is allowed)."""
     module_name, _, qualname = str(path).partition(":")
-    module = sys.modules.get(module_name) if module_name.startswith(_OWN_PACKAGE) else None
+    module = _loaded_module(module_name)
     cls = module
     for part in qualname.split(".") if module is not None else ():
         cls = getattr(cls, part, None)
