@@ -38,6 +38,7 @@ typedef struct {
     char *name;
     int host_logging;
     double time_step_s;             /* the only communication step this FMU takes (0: not known yet) */
+    char error[MESSAGE_SIZE];       /* pythonfmu's last error message, for fmi2Instantiate's own */
 } Instance;
 
 /* pythonfmu's FMI functions, resolved once */
@@ -100,6 +101,8 @@ static void relay(fmi2ComponentEnvironment env, fmi2String name, fmi2Status stat
     va_start(args, message);
     vsnprintf(text, sizeof text, message, args);
     va_end(args);
+    if (status >= fmi2Error)
+        memcpy(inst->error, text, sizeof text);
     if (inst->host.logger != NULL)
         inst->host.logger(inst->host.componentEnvironment, name, status, category, "%s", text);
 }
@@ -279,6 +282,21 @@ static int local_file_uri(const char *uri, char *out, size_t size, const fmi2Cal
     return 1;
 }
 
+/* Why pythonfmu could not create the FMU's Python class, in one line after its own message: what to install
+   when the embedded Python lacks numpy or scipy, else the exception it reported (the last line of its
+   message, e.g. ModuleNotFoundError("No module named 'pantohil.models.rig.chain'")). */
+static void say_not_created(const fmi2CallbackFunctions *cb, fmi2String name, const char *error) {
+    const char *line = strrchr(error, '\n');
+    line = line != NULL && line[1] != '\0' ? line + 1 : error;
+    if (strstr(error, "No module named 'numpy") != NULL || strstr(error, "No module named 'scipy") != NULL)
+        say(cb, name, fmi2Error, "pantohil FMU: its Python class could not be created (see the message before); "
+            "the embedded Python needs numpy and scipy (PYTHONHOME=%s, PYTHONPATH=%s)",
+            getenv("PYTHONHOME") ? getenv("PYTHONHOME") : "(unset)", getenv("PYTHONPATH") ? getenv("PYTHONPATH") : "(unset)");
+    else
+        say(cb, name, fmi2Error, "pantohil FMU: its Python class could not be created: %s",
+            line[0] != '\0' ? line : "(pythonfmu gave no message)");
+}
+
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String resources,
                               const fmi2CallbackFunctions *callbacks, fmi2Boolean visible, fmi2Boolean logging) {
     Instance *inst;
@@ -296,9 +314,7 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     inst->name = strdup(name ? name : "");
     inst->inner = py.instantiate(name, type, guid, location, &inst->wrapped, visible, fmi2True);
     if (inst->inner == NULL) {
-        say(callbacks, name, fmi2Error, "pantohil FMU: its Python class could not be created (see the message "
-            "before); the embedded Python needs numpy and scipy (PYTHONHOME=%s, PYTHONPATH=%s)",
-            getenv("PYTHONHOME") ? getenv("PYTHONHOME") : "(unset)", getenv("PYTHONPATH") ? getenv("PYTHONPATH") : "(unset)");
+        say_not_created(callbacks, name, inst->error);
         free(inst->name);
         free(inst);
         return NULL;
