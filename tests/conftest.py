@@ -124,6 +124,15 @@ def isolated_cache(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def default_fmus(tmp_path_factory) -> Path:
+    """The folder of the default case's four FMUs (`pantohil build`), built once; tests only read them."""
+    out = tmp_path_factory.mktemp("default_fmus")
+    proc = pantohil("build", "--out", str(out))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return out
+
+
+@pytest.fixture(scope="session")
 def default_run(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("runs") / "default"
     proc = pantohil("run", "--out", str(out), "--quiet")

@@ -117,12 +117,9 @@ ChainPantograph.step = lambda self, z_next: _step_of_version_1(self, z_next) + {
 
 
 @pytest.fixture(scope="module")
-def project_fmus(tmp_path_factory) -> Path:
+def project_fmus(default_fmus) -> Path:
     """The default case's four FMUs, built by this pantohil."""
-    out = tmp_path_factory.mktemp("isolation") / "fmus"
-    proc = pantohil("build", "--out", str(out))
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return out
+    return default_fmus
 
 
 def _second_version(tmp_path: Path) -> Path:

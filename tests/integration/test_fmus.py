@@ -11,15 +11,11 @@ import xml.etree.ElementTree as ET
 import pytest
 from fmpy.validation import validate_fmu
 
-from conftest import pantohil
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    out = tmp_path_factory.mktemp("fmus")
-    proc = pantohil("build", "--out", str(out))
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return {p.stem: p for p in out.glob("*.fmu")}
+def built(default_fmus):
+    return {p.stem: p for p in default_fmus.glob("*.fmu")}
 
 
 @pytest.mark.slow
