@@ -45,7 +45,7 @@ import numpy as np
 
 from pantohil.models.case import SCHEMA, CaseError, load_case
 from pantohil.models.input_files import InputFileError, load_toml
-from pantohil.models.schema import FileSchema, param
+from pantohil.models.schema import FileSchema, coerce, param
 from pantohil.models.storage import atomic_path
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
@@ -196,9 +196,11 @@ def load_sweep(path: Path) -> dict:
 
 
 def _engine(path: Path, engine: str) -> str:
-    if engine not in ENGINES:
-        _fail(path, f"sweep.engine must be one of {', '.join(ENGINES)} (got {engine!r})", "sweep.engine")
-    return engine
+    """An engine given beside the sweep file, checked against [sweep] engine's declaration."""
+    try:
+        return coerce(SWEEP_FILE.keys("sweep")["engine"], engine, SweepFileError)
+    except SweepFileError as exc:
+        _fail(path, str(exc), exc.key)
 
 
 def sweep_point(task: dict) -> dict:
