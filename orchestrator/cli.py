@@ -400,7 +400,7 @@ def _print_run(result, out: Path) -> None:
         print(f"real time ({rt['scheduling']}): {rt['deadline_misses']} of {rt['steps']} deadlines missed; "
               f"lateness p50 {late['p50']:.0f} us, p99 {late['p99']:.0f} us, max {late['max']:.0f} us")
     if result.link is not None:
-        from pantohil.orchestrator.hil_run import LINK_COUNTERS
+        from pantohil.orchestrator.link_diagnostics import LINK_COUNTERS
 
         print("link: " + ", ".join(f"{k} {result.link[k]}" for k in LINK_COUNTERS))
         if "answer_us" in result.link:
@@ -557,7 +557,7 @@ def _cmd_identify(args) -> int:
 
 def _cmd_build(args) -> int:
     from pantohil.builder.build_fmus import build_case_fmus
-    from pantohil.orchestrator.hil_run import delay_plan
+    from pantohil.orchestrator.run_topology import delay_plan
     from pantohil.orchestrator.output_paths import atomic_output_folder, check_output_file
 
     case = load_case(args.case, args.overrides)

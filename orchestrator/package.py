@@ -12,7 +12,8 @@ from pantohil.builder import build_fmus
 from pantohil.builder.ssp import write_ssp
 from pantohil.models.case import Case, CaseError
 
-from .hil_run import delay_plan, run_case
+from .hil_run import run_case
+from .run_topology import delay_plan
 from .output_paths import check_output_folder
 
 TEMPLATES = Path(build_fmus.__file__).parent / "partner"

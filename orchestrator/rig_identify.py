@@ -210,7 +210,7 @@ def _adapter_rows(case: Case, hardware: tuple, heights: np.ndarray, extra: int, 
 
 
 def _check_session(inst, hardware: tuple) -> None:
-    from .hil_run import REFUSALS
+    from .link_diagnostics import REFUSALS
 
     start = inst.get_values(["link_state", "session_started", "rig_refusal"])
     if start["link_state"] == LINK_FAULT and not start["session_started"]:

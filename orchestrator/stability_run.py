@@ -25,7 +25,7 @@ from pantohil.models.stability.map_point import (best_relaxation, contact_freque
 from pantohil.models.storage import atomic_path
 
 from .dask_engine import dask_client, run_tasks, tune_worker_allocator, worker_count
-from .hil_run import delay_plan
+from .run_topology import delay_plan
 from .output_paths import atomic_output_folder
 from .report import write_json_atomic
 

@@ -103,7 +103,7 @@ def main() -> None:
     args = ap.parse_args()
     from pantohil.builder.build_fmus import build_case_fmus
     from pantohil.models.case import load_case
-    from pantohil.orchestrator.hil_run import VIRTUAL, delay_plan
+    from pantohil.orchestrator.run_topology import VIRTUAL, delay_plan
     from pantohil.orchestrator.master import JacobiMaster
 
     case = load_case(None, [])

@@ -6,7 +6,7 @@ import pytest
 from pythonfmu import Fmi2Slave, Integer, Real
 
 from pantohil.models.case import load_case
-from pantohil.orchestrator.hil_run import delay_plan
+from pantohil.orchestrator.run_topology import delay_plan
 from pantohil.orchestrator.inprocess import create_slaves
 
 
