@@ -367,7 +367,7 @@ def ssp_case(ssp: Path, system: dict, overrides: list[str]):
     as any case (ranges, combinations), so that the run's summary reports the values that ran; the FMU
     parameters of `system` become that case's. CaseError (one line naming the SSP and the key) for a value out
     of range; SspError for a parameter that no case gives."""
-    from .build_fmus import default_delay_steps, fmu_parameters
+    from .fmu_parameters import default_delay_steps, fmu_parameters
 
     raw, source = load_case_dict(system["case_file"])
     case = build_case(apply_overrides(raw, overrides), source)

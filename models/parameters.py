@@ -2,7 +2,7 @@
 
 Each field's metadata (`Param`, models/schema.py) carries the unit, the range, the description, the FMI
 type and the FMU that receives it. The case schema and its validation (`models/case.py`), the FMU
-variable tables (`fmus/`), the builder's mapping (`builder/build_fmus.py`) and the key reference
+variable tables (`fmus/`), the builder's mapping (`builder/fmu_parameters.py`) and the key reference
 (`docs/case-reference.md`, orchestrator/file_reference.py) are derived from these declarations.
 
 Naming rule (case keys, FMU variables and summary fields): a parameter has one name, `snake_case`,

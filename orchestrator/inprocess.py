@@ -24,7 +24,9 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
-from pantohil.builder.build_fmus import CLASS_NAMES, fmu_parameters, stage_case_data
+from pantohil.builder.build_fmus import CLASS_NAMES
+from pantohil.builder.fmu_parameters import fmu_parameters
+from pantohil.builder.staging import stage_case_data
 from pantohil.builder.system import CONNECTIONS, FMU_NAMES
 from pantohil.models.case import Case
 

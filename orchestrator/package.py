@@ -9,6 +9,8 @@ import tempfile
 from pathlib import Path
 
 from pantohil.builder import build_fmus
+from pantohil.builder.fmu_parameters import fmu_parameters
+from pantohil.builder.model_description import pantohil_version
 from pantohil.builder.ssp import write_ssp
 from pantohil.models.case import Case, CaseError
 
@@ -27,7 +29,7 @@ def case_text(case: Case) -> str:
 def make_ssp(case: Case, fmus: dict[str, Path], path: Path, overrides: list[str]) -> Path:
     """Write the SSP 1.0 file of a case's system (FMUs, connections, start values, the case text) to `path`."""
     d = delay_plan(case)["delay_steps"]
-    params = build_fmus.fmu_parameters(case, d)
+    params = fmu_parameters(case, d)
     text = case_text(case)
     if overrides:  # an SSP carries the case as run, overrides included
         text += "\n# overrides given on the command line:\n" + "".join(f"# --set {o}\n" for o in overrides)
@@ -68,7 +70,7 @@ def make_package(case: Case, out_dir: Path, overrides: list[str], progress: bool
         shutil.copy2(TEMPLATES / "run_fmpy.py", stage / "run_fmpy.py")
         shutil.copy2(TEMPLATES / "requirements.txt", stage / "requirements.txt")
         readme = (TEMPLATES / "README.md").read_text()
-        for key, value in {"CASE_NAME": case.name, "VERSION": build_fmus._version(), "STEPS": str(steps),
+        for key, value in {"CASE_NAME": case.name, "VERSION": pantohil_version(), "STEPS": str(steps),
                            "DT": repr(ref.dt_s), "DELAY": str(ref.hil["delay_steps"])}.items():
             readme = readme.replace(key, value)
         (stage / "README.md").write_text(readme)

@@ -7,7 +7,7 @@ import importlib
 
 import pytest
 
-from pantohil.builder.build_fmus import fmu_parameters
+from pantohil.builder.fmu_parameters import fmu_parameters
 from pantohil.models.case import SCHEMA, load_case
 from pantohil.models.parameters import all_keys, fmu_keys, fmu_variable_names
 
