@@ -6,7 +6,7 @@ from __future__ import annotations
 import uuid
 import xml.etree.ElementTree as ET
 
-from pantohil.fmus import fmu_support
+from pantohil.fmus.variables import DISPLAY_UNITS, UNITS
 
 
 # What the loader library and the state hooks make true of every pantohil FMU
@@ -58,9 +58,9 @@ def decorate_model_description(xml_bytes: bytes, variables, experiment: tuple[fl
     units = ET.Element("UnitDefinitions")
     for u in used:
         unit = ET.SubElement(units, "Unit", name=u)
-        ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in fmu_support.UNITS[u].items()})
-        if u in fmu_support.DISPLAY_UNITS:
-            name, factor = fmu_support.DISPLAY_UNITS[u]
+        ET.SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[u].items()})
+        if u in DISPLAY_UNITS:
+            name, factor = DISPLAY_UNITS[u]
             ET.SubElement(unit, "DisplayUnit", {"name": name, "factor": repr(factor)})
     cosim = root.find("CoSimulation")
     root.insert(list(root).index(cosim) + 1, units)

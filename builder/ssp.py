@@ -12,7 +12,7 @@ from pathlib import Path
 
 from fmpy import read_model_description
 
-from pantohil.fmus.fmu_support import UNITS
+from pantohil.fmus.variables import UNITS
 from pantohil.models.case import CaseError, apply_overrides, build_case, load_case_dict
 from pantohil.models.errors import InputError
 from pantohil.models.input_files import InputFileError, open_regular

@@ -7,7 +7,7 @@ import json
 import shutil
 from pathlib import Path
 
-from pantohil.fmus import fmu_support
+from pantohil.fmus import fmu_support, variables
 from pantohil.models.case import Case
 from pantohil.models.catenary.interface import catenary_model
 from pantohil.models.rig.compensation import write_response_csv
@@ -15,7 +15,8 @@ from pantohil.models.rig.rig_file import rig_to_toml
 
 FMUS_DIR = Path(fmu_support.__file__).parent
 MODELS_DIR = Path(importlib.import_module("pantohil.models").__file__).parent
-SUPPORT_MODULES = ("__init__.py", "fmu_support.py", "state_codec.py", "udp_protocol.py", "link_client.py")
+SUPPORT_MODULES = ("__init__.py", "fmu_support.py", "variables.py", "fmu_state.py", "fast_accessors.py",
+                   "state_codec.py", "udp_protocol.py", "link_client.py")
 BINDING = "own_package.py"  # beside the FMU's script in resources/: binds it to the FMU's own copy of the package
 
 
@@ -36,10 +37,10 @@ def stage_case_data(name: str, params: dict, case: Case, stage: Path, link: bool
     the rig's response and what the catenary model stages (models/catenary/interface.py). The in-process
     engine initialises the same FMU classes from such a folder; `link`: large files as symbolic links."""
     files = []
-    (stage / fmu_support.PARAMETERS_FILE).write_text(json.dumps(params, indent=1, sort_keys=True))
-    files.append(stage / fmu_support.PARAMETERS_FILE)
-    (stage / fmu_support.REQUIREMENTS_FILE).write_text("\n".join(fmu_support.REQUIREMENTS) + "\n")
-    files.append(stage / fmu_support.REQUIREMENTS_FILE)
+    (stage / variables.PARAMETERS_FILE).write_text(json.dumps(params, indent=1, sort_keys=True))
+    files.append(stage / variables.PARAMETERS_FILE)
+    (stage / variables.REQUIREMENTS_FILE).write_text("\n".join(variables.REQUIREMENTS) + "\n")
+    files.append(stage / variables.REQUIREMENTS_FILE)
     if name == "rig" and case.rig_spec is not None:
         (stage / "rig.toml").write_text(rig_to_toml(case.rig_spec, f"rig of case {case.name}"))
         files.append(stage / "rig.toml")

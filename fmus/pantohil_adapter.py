@@ -20,7 +20,8 @@ _spec.loader.exec_module(_binding)
 
 with _binding.own_package(globals()):
     from pantohil.fmus import udp_protocol as proto
-    from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
+    from pantohil.fmus.fmu_support import PantohilSlave
+    from pantohil.fmus.variables import Var, case_variables, register_all
     from pantohil.fmus.link_client import (COUNTERS, REFUSED_HORIZON, REFUSED_LATENCY, RIG_PACED_COUNTERS,
                                            TICK_COUNTS, LinkClient, LinkConfig)
     from pantohil.models.hil.loop import MAX_HORIZON_STEPS

@@ -17,7 +17,8 @@ _binding = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_binding)
 
 with _binding.own_package(globals()):
-    from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
+    from pantohil.fmus.fmu_support import PantohilSlave
+    from pantohil.fmus.variables import Var, case_variables, register_all
     from pantohil.models.catenary.grid import SpanGrid
     from pantohil.models.catenary.interface import CATENARIES
     from pantohil.models.catenary.pfem.model import MAX_DROPPERS

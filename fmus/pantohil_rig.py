@@ -15,7 +15,8 @@ _binding = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(_binding)
 
 with _binding.own_package(globals()):
-    from pantohil.fmus.fmu_support import PantohilSlave, Var, case_variables, register_all
+    from pantohil.fmus.fmu_support import PantohilSlave
+    from pantohil.fmus.variables import Var, case_variables, register_all
     from pantohil.models.rig.chain import Rig, RigParameters
     from pantohil.models.rig.drive_chain import RigChain, latency_steps
     from pantohil.models.rig.rig_file import load_rig_file
