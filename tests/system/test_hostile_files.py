@@ -223,7 +223,7 @@ def test_deep_nesting_huge_integers_and_nul_in_each_toml_reader(tmp_path):
 
 def _operator_file(tmp: Path) -> Path:
     from pantohil.models.catenary.asm.string import AsmParameters
-    from pantohil.models.catenary.pfem.blocks import string_block
+    from string_references import string_block
     from pantohil.models.catenary.pfem.operator_file import save_operators
     from pantohil.models.catenary.pfem.operators import PfemSettings, build_operators
 

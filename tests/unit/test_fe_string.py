@@ -17,10 +17,8 @@ def test_a_long_fe_string_reproduces_the_asm_closed_form():
         one_sided_harmonics,
         single_pantograph,
     )
-    from pantohil.models.catenary.fe.simulation import (
-        asm_string_section,
-        integrate_section,
-    )
+    from pantohil.models.catenary.fe.simulation import integrate_section
+    from string_references import asm_string_section
     from pantohil.models.catenary.receptance import harmonic_count
     from pantohil.models.metrics import lowpass, lowpass_periodic
 

@@ -11,7 +11,8 @@ from conftest import CASES_DIR as CASES
 from conftest import CATENARIES_DIR
 from pantohil.models.catenary.asm.string import AsmParameters
 from pantohil.models.catenary.fe.definition import load_definition
-from pantohil.models.catenary.pfem.blocks import catenary_block, string_block
+from pantohil.models.catenary.pfem.blocks import catenary_block
+from string_references import string_block
 from pantohil.models.catenary.pfem.frf import FixedInterfaceModel, direct_receptance
 from pantohil.models.catenary.pfem.operator_file import (
     OperatorFileError,

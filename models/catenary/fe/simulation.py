@@ -351,34 +351,6 @@ def integrate_section(model: SectionModel, pan: PantographParameters, dt_s: floa
                        np.zeros(0), 0, 0.0, time.perf_counter() - t0, peak)
 
 
-def asm_string_section(asm, span_m: float, n_spans: int, elements_per_span: int, z0, speed_m_s: float,
-                       dt_s: float) -> SectionModel:
-    """ASM2 (Paper A eq. 7) as a finite FE string of n spans: linear elements, tension T, density mu,
-    distributed support kbar, C = alpha M + beta K, ends absorbing (dashpots sqrt(T mu)). `z0(x)` is
-    the static contact-line height, periodic over a span."""
-    from pantohil.models.catenary.pfem.blocks import linear_shapes
-
-    ne = n_spans * elements_per_span
-    Le = span_m / elements_per_span
-    n = ne + 1
-    i = np.arange(ne)
-    rows = np.concatenate([i, i, i + 1, i + 1])
-    cols = np.concatenate([i, i + 1, i, i + 1])
-    mk = np.repeat(np.array([2, 1, 1, 2]) / 6.0 * Le, ne)
-    kk = np.repeat(np.array([1, -1, -1, 1]) / Le, ne)
-    M = sparse.csr_matrix((mk * asm.density_kg_m, (rows, cols)), shape=(n, n))
-    K = sparse.csr_matrix((kk * asm.tension_N + mk * asm.support_stiffness_N_m2, (rows, cols)), shape=(n, n))
-    dash = np.zeros(n)
-    dash[[0, -1]] = np.sqrt(asm.tension_N * asm.density_kg_m)
-    n_steps = int(round(n_spans * span_m / (speed_m_s * dt_s)))
-    x = np.minimum(np.arange(n_steps + 1) * speed_m_s * dt_s, n_spans * span_m - 1e-9)
-    shapes = linear_shapes(np.arange(n) * Le, x, n, np.arange(n))
-    supports = np.arange(0, n, elements_per_span)
-    empty = np.zeros(0, dtype=int)
-    return SectionModel(K, M, asm.alpha_1_s, asm.beta_s, dash, shapes, z0(np.mod(x, span_m)), x, empty, empty,
-                        np.zeros(0), np.zeros(0), supports)
-
-
 def _pantograph_force(p: ChainPantograph, z_next: float) -> float:
     """The contact force the pantograph's next HHT step would give for a wire height z_next, in contact
     (without advancing it): its step is affine in z_next."""

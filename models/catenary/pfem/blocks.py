@@ -1,5 +1,5 @@
-"""Periodic blocks for the PFEM: the academic string of Paper C's appendix, a discretised ASM2 string
-(the cross-check of the two periodic models) and one span of a catenary file (Paper C sec. 2)."""
+"""Periodic blocks for the PFEM: the academic string of Paper C's appendix and one span of a catenary file
+(Paper C sec. 2)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -7,7 +7,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import sparse
 
-from pantohil.models.catenary.asm.string import AsmParameters
 from pantohil.models.catenary.fe.definition import CatenaryDefinition, CatenaryError
 from pantohil.models.catenary.fe.model import build_section, form_find
 from pantohil.models.catenary.pfem.frf import PeriodicBlock
@@ -84,26 +83,6 @@ def appendix_block(T=22000.0, mu=1.3, Le=0.75, k=300.0, c=10.0) -> ContactBlock:
     nodes = np.array([0.0, Le, 2 * Le])
     blk = PeriodicBlock(M, K, C, [0], [2], 2 * Le)
     return ContactBlock(blk, lambda x: linear_shapes(nodes, x, 3, np.arange(3)))
-
-
-def string_block(cat: AsmParameters, span_m: float, n_elements: int) -> ContactBlock:
-    """ASM2 (Paper A eq. 7) discretised with linear elements: tension T, density mu, distributed support
-    kbar (consistent), C = alpha M + beta K. One node per element end; the last node is the next
-    block's first."""
-    Le = span_m / n_elements
-    n = n_elements + 1
-    i = np.arange(n_elements)
-    rows = np.concatenate([i, i, i + 1, i + 1])
-    cols = np.concatenate([i, i + 1, i, i + 1])
-    mk = np.array([2, 1, 1, 2]) / 6.0 * Le
-    kk = np.array([1, -1, -1, 1]) / Le
-    M = sparse.csr_matrix((np.repeat(mk, n_elements) * cat.density_kg_m, (rows, cols)), shape=(n, n))
-    K = sparse.csr_matrix((np.repeat(kk, n_elements) * cat.tension_N
-                           + np.repeat(mk, n_elements) * cat.support_stiffness_N_m2, (rows, cols)), shape=(n, n))
-    C = cat.alpha_1_s * M + cat.beta_s * K
-    blk = PeriodicBlock(M, K, C, [0], [n - 1], span_m, cat.alpha_1_s, cat.beta_s)
-    nodes = np.arange(n) * Le
-    return ContactBlock(blk, lambda x: linear_shapes(nodes, x, n, np.arange(n)), z0=lambda x: np.zeros_like(x))
 
 
 def _dropper_and_support_terms(cat: CatenaryDefinition, ndof: int, lower, upper, kd: np.ndarray,
