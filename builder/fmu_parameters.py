@@ -12,6 +12,7 @@ def fmu_parameters(case: Case, delay_steps: int,
                    rig_address: tuple[str, int] = ("127.0.0.1", 47800)) -> dict[str, dict]:
     """The case as FMU parameter values, by FMU: every case key that reaches an FMU under its declared
     name (models/parameters.py), and the quantities the FMUs take derived from the case."""
+    case.refuse_second_pantograph("an FMU system")
     pan = case.pantograph
     resolved = {"hil.delay_steps": delay_steps, "pantograph.uplift_force_N": pan.uplift_force_N,
                 "pantograph.masses_kg": pan.masses_kg, "pantograph.stiffnesses_N_m": pan.stiffnesses_N_m,

@@ -28,6 +28,7 @@ from pantohil.models.pantograph.lumped import PantographParameters
 from pantohil.models.parameters import (
     AUTO,
     MAX_SAMPLES_PER_SPAN,
+    OPTIONAL_SECTIONS,
     SECTIONS,
     CaseSections,
     Key,
@@ -50,7 +51,8 @@ class CaseError(InputError):
     """A case that cannot run; the message is one line naming the key."""
 
 
-CASE_FILE = FileSchema("case file", SECTIONS, CaseError, reference="case-reference", to_fmus=True)
+CASE_FILE = FileSchema("case file", SECTIONS, CaseError, optional_sections=OPTIONAL_SECTIONS,
+                       reference="case-reference", to_fmus=True)
 SCHEMA: dict[str, dict[str, Key]] = {section: section_keys(section) for section in SECTIONS}
 """Every case key, by section, derived from the declarations in models/parameters.py."""
 
@@ -196,6 +198,14 @@ class Case:
     def z0_samples(self) -> np.ndarray:
         """Static contact-wire height z0 at the N samples of a span [m]."""
         return self.profile.heights(self.sample_positions_m())
+
+    def refuse_second_pantograph(self, what: str) -> None:
+        """CaseError for a case with a [second_pantograph] given to `what`, which runs one pantograph: a
+        result that leaves the second out is not the case's."""
+        if self.sections.second_pantograph is not None:
+            raise CaseError(f"second_pantograph: {what} runs one pantograph; this case has two (two run in the "
+                            "in-process pair loop, models/hil/pair_loop.py, and `pantohil direct`)",
+                            key="second_pantograph")
 
     def reference_height_m(self) -> float:
         """Wire height at which the pantograph's static force equals the uplift force: the mean

@@ -216,11 +216,22 @@ class RunSection:
     divergence_spans: int = param(10, "1", "spans over which that median is taken", 1, MAX_SPANS)
 
 
+@dataclass(frozen=True)
+class SecondPantographSection:
+    """[second_pantograph]: a second pantograph on the same catenary, L apart (Paper A secs. 3.4 and 5); absent,
+    the line carries one. It is the first pantograph's model and parameters, running virtual."""
+
+    spacing_m: float = param(REQUIRED, "m", "distance L between the two pantographs", 0.0, 10_000.0, low_open=True)
+    position: str = param("trailing", "1", "where the second runs relative to the first: behind it (trailing) or "
+                                           "ahead of it (leading)", choices=("trailing", "leading"))
+
+
 SECTIONS: dict[str, type] = {
     "case": CaseSection, "catenary": CatenarySection, "profile": ProfileSection, "pantograph": PantographSection,
     "rig": RigSection, "link": LinkSection, "actuator": ActuatorSection, "hil": HilSection, "pfem": PfemSection,
-    "run": RunSection,
+    "run": RunSection, "second_pantograph": SecondPantographSection,
 }
+OPTIONAL_SECTIONS = ("second_pantograph",)  # absent from a case file: None
 
 
 @dataclass(frozen=True)
@@ -237,12 +248,14 @@ class CaseSections:
     hil: HilSection
     pfem: PfemSection
     run: RunSection
+    second_pantograph: SecondPantographSection | None
 
     @classmethod
     def of(cls, values: dict) -> CaseSections:
         """The sections of validated values ({section: {key: value}}, every key present)."""
-        return cls(**{name: SECTIONS[name](**{key: tuple(v) if isinstance(v, list) else v
-                                              for key, v in values[name].items()}) for name in SECTIONS})
+        return cls(**{name: None if values.get(name) is None else
+                      SECTIONS[name](**{key: tuple(v) if isinstance(v, list) else v for key, v in values[name].items()})
+                      for name in SECTIONS})
 
 
 def section_keys(section: str) -> dict[str, Key]:

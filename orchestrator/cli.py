@@ -644,6 +644,9 @@ def _cmd_direct(args) -> int:
     case = load_case(args.case, args.overrides)
     if args.second_pantograph_at is not None and args.second_pantograph_at <= 0:
         raise CaseError(f"--second-pantograph-at: must be > 0 m (got {args.second_pantograph_at:g})")
+    second = case.sections.second_pantograph
+    if args.second_pantograph_at is None and second is not None:  # the closed form takes the first as leading
+        args.second_pantograph_at = second.spacing_m
     if args.out:
         from pantohil.orchestrator.output_paths import check_output_file
 

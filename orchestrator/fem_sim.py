@@ -38,6 +38,7 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
     the force on the PFEM run's grid; also dropper corrections, run.mcap and plots. The folder is checked
     before the simulation (new or empty; `overwrite` replaces it whole) and appears complete or not at all.
     """
+    case.refuse_second_pantograph("pantohil fem-sim")
     spans = central_spans(n_spans, central)
     if not case.sections.catenary.definition_file:
         raise CaseError("catenary.definition_file: the case's catenary has no catenary file to build a section from")

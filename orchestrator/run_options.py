@@ -41,6 +41,7 @@ def is_rig_paced(case: Case, options: RunOptions) -> bool:
 
 def check_options(case: Case, options: RunOptions) -> None:
     """A request that cannot run: one CaseError naming the option or key, before anything is written."""
+    case.refuse_second_pantograph("pantohil run")
     master = MASTERS.get(options.master_kind, "master")
     check_master_installed(options.master_kind)
     _check_engine(options)

@@ -163,6 +163,7 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
     given takes the case's value (the delay: the case's latency and advance). The folder `out` is checked
     first and appears complete or not at all (`overwrite` replaces a used one)."""
     case = load_case(case_path, overrides)
+    case.refuse_second_pantograph("pantohil stability")
     update = update or case.hil_update
     if update not in ("step", "span"):
         raise CaseError(f"update: must be step or span (got {update!r})")

@@ -14,7 +14,7 @@ from pantohil.models.parameters import SECTIONS
 
 
 def test_every_key_of_every_section_is_an_attribute_of_its_typed_section():
-    case = load_case("pfem_benchmark_250", ["run.max_spans=7"])
+    case = load_case("pfem_benchmark_250", ["run.max_spans=7", "second_pantograph.spacing_m=90"])
     for name, cls in SECTIONS.items():
         section = getattr(case.sections, name)
         assert isinstance(section, cls)
@@ -22,6 +22,7 @@ def test_every_key_of_every_section_is_an_attribute_of_its_typed_section():
             value = case.values[name][f.name]
             assert getattr(section, f.name) == (tuple(value) if isinstance(value, list) else value)
     assert case.sections.run.max_spans == 7
+    assert load_case().sections.second_pantograph is None  # an optional section, absent
     with pytest.raises(dataclasses.FrozenInstanceError):
         case.sections.run.max_spans = 8
 
