@@ -182,14 +182,14 @@ def test_simulate_fmu_takes_step_and_stop_time_from_the_model_description(tmp_pa
     for name in (*FMU_NAMES, "adapter"):  # the adapter alone: no rig answers, its counters run
         md = read_model_description(str(out / f"{name}.fmu"))
         assert float(md.defaultExperiment.stepSize) == 0.001 and float(md.defaultExperiment.stopTime) == pytest.approx(
-            0.936
+            0.5
         )
         assert md.coSimulation.canHandleVariableCommunicationStepSize is False
         run = subprocess.run([sys.executable, "-c", SIMULATE_ALONE, str(out / f"{name}.fmu")], capture_output=True,
                              text=True, timeout=600)
         words = run.stdout.split()
-        assert words[:2] == ["steps", "936"] and run.returncode == 0, run.stdout + run.stderr
-        assert float(words[3]) == pytest.approx(0.001, rel=1e-9) and float(words[5]) == pytest.approx(0.936, rel=1e-9)
+        assert words[:2] == ["steps", "500"] and run.returncode == 0, run.stdout + run.stderr
+        assert float(words[3]) == pytest.approx(0.001, rel=1e-9) and float(words[5]) == pytest.approx(0.5, rel=1e-9)
 
 
 @pytest.mark.slow

@@ -48,7 +48,7 @@ def test_model_descriptions_state_step_state_and_dependencies(built):
         assert cs.get("canHandleVariableCommunicationStepSize") == "false", name
         assert cs.get("canGetAndSetFMUstate") == "true" and cs.get("canSerializeFMUstate") == "true", name
         experiment = root.find("DefaultExperiment")
-        assert float(experiment.get("stepSize")) == 0.001 and float(experiment.get("stopTime")) == 0.936, name
+        assert float(experiment.get("stepSize")) == 0.001 and float(experiment.get("stopTime")) == 0.5, name
         variables = list(root.iter("ScalarVariable"))
         outputs = [str(i + 1) for i, sv in enumerate(variables) if sv.get("causality") == "output"]
         assert [u.get("index") for u in root.iterfind("ModelStructure/Outputs/Unknown")] == outputs
