@@ -224,6 +224,10 @@ class SecondPantographSection:
     spacing_m: float = param(REQUIRED, "m", "distance L between the two pantographs", 0.0, 10_000.0, low_open=True)
     position: str = param("trailing", "1", "where the second runs relative to the first: behind it (trailing) or "
                                            "ahead of it (leading)", choices=("trailing", "leading"))
+    coupling_compensation: bool = param(True, "1", "apply the force residuals through the pair's coupling "
+                                                   "compensation, from the pantograph model's receptance, so that "
+                                                   "each contact point iterates as if alone (models/hil/pair.py); "
+                                                   "false: the plain iteration of Paper D for the pair")
 
 
 SECTIONS: dict[str, type] = {

@@ -9,6 +9,13 @@ points' forces through the four operators I_ij (the height at i from a unit forc
 and each point commands its own height advanced by its own delay D_i (Paper D sec. 3.4): a pantograph on
 the rig behind the rig's latency, a virtual one behind the master's connections. The relaxation, the
 initial ramp and the extra loop delay E are the case's, for both points.
+
+The cross coupling of the two points can make that iteration diverge where each point alone converges (the
+leading pantograph's wave reaches the trailing one almost undamped at low harmonics). With a coupling
+compensation Q (models/catenary/asm/pair.py `coupling_compensation`), the force residuals r_j = f_j -
+f_j,relaxed are applied through Q: f_relaxed += mu_c Q r and z = z0 + I f_relaxed, so that, with the
+pantographs' model receptance in Q, the pair iterates as two contact points alone; the fixed point is the
+same with or without Q.
 """
 from __future__ import annotations
 
@@ -26,10 +33,12 @@ class PairedHil:
     and `apply(f)`; `z0` holds the (frequency-reduced) static heights of both points, shape (2, N);
     `delay_steps` the advance D of each point (settings.delay_steps is not used)."""
 
-    CONSTANT_ATTRIBUTES = ("ops", "z0", "s", "delays")
+    CONSTANT_ATTRIBUTES = ("ops", "z0", "s", "delays", "q", "iq")
     POINTS = 2
 
-    def __init__(self, operators, z0: np.ndarray, settings: HilSettings, delay_steps: tuple[int, int]):
+    def __init__(self, operators, z0: np.ndarray, settings: HilSettings, delay_steps: tuple[int, int],
+                 compensation: tuple | None = None):
+        """`compensation` (Q, I Q), each 2 x 2 operators as `operators`: the coupling compensation."""
         if settings.update not in UPDATES:
             raise ValueError(f"hil.update must be one of {UPDATES}, got {settings.update!r}")
         self.ops = operators
@@ -45,6 +54,7 @@ class PairedHil:
         self.last_force = np.zeros((self.POINTS, self.n))  # the force in use at each sample of each point
         self.force_estimate = self.last_force
         self._held: tuple[list, list] = ([], [])
+        self.q, self.iq = compensation if compensation is not None else (None, None)
 
     @property
     def sample(self) -> int:
@@ -82,22 +92,32 @@ class PairedHil:
         return tuple(float(hold(self._held[i], commands[i], self.s.hold_steps)) for i in range(self.POINTS))
 
     def _update_step(self, n_bar: int, forces, measured, mu: float) -> None:
-        """Paper D eqs. (2), (10) for each point's force, through both operators it drives."""
-        for j in range(self.POINTS):
-            if not measured[j]:
+        """Paper D eqs. (2), (10) for both points' residuals at once, through the operators they drive (and Q)."""
+        deltas = [mu * (forces[j] - self.force_relaxed[j, n_bar]) if measured[j] else 0.0
+                  for j in range(self.POINTS)]
+        for j, delta in enumerate(deltas):
+            if delta == 0.0:
                 continue
-            delta = mu * (forces[j] - self.force_relaxed[j, n_bar])
-            self.force_relaxed[j, n_bar] += delta
-            if delta != 0.0:
-                for i in range(self.POINTS):
+            if self.q is None:
+                self.force_relaxed[j, n_bar] += delta
+            for i in range(self.POINTS):
+                if self.q is None:
                     self.z[i] += delta * self.ops[i][j].column(n_bar)
+                else:
+                    self.force_relaxed[i] += delta * self.q[i][j].column(n_bar)
+                    self.z[i] += delta * self.iq[i][j].column(n_bar)
 
     def _update_span(self, mu: float) -> None:
-        """Paper D eq. (A.8) for the pair, at the end of a block."""
-        z_new = np.array([self.z0[i] + sum(self.ops[i][j].apply(self._block_force[j]) for j in range(self.POINTS))
+        """Paper D eq. (A.8) for the pair, at the end of a block: f_relaxed += mu_c Q (f - f_relaxed), and
+        z = z0 + I f_relaxed."""
+        residual = self._block_force - self.force_relaxed
+        if self.q is not None:
+            residual = np.array([sum(self.q[i][j].apply(residual[j]) for j in range(self.POINTS))
+                                 for i in range(self.POINTS)])
+        self.force_relaxed = self.force_relaxed + mu * residual
+        z_new = np.array([self.z0[i] + sum(self.ops[i][j].apply(self.force_relaxed[j]) for j in range(self.POINTS))
                           for i in range(self.POINTS)])
-        self.force_relaxed = mu * self._block_force + (1 - mu) * self.force_relaxed
-        self._z_older, self.z = self.z, mu * z_new + (1 - mu) * self.z
+        self._z_older, self.z = self.z, z_new
 
     def _span_command(self, i: int, n_bar: int) -> float:
         """Linear blend of point i's two latest block vectors, Paper D eq. (3), advanced by its D."""

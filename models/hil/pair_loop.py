@@ -11,9 +11,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..case import Case, CaseError
-from ..catenary.asm.pair import pair_operators, pair_static_compliance_m_N, second_offset_m
+from ..catenary.asm.pair import (
+    circulant_blocks,
+    coupling_compensation,
+    pair_spectra,
+    pair_static_compliance_m_N,
+    second_offset_m,
+)
 from ..catenary.receptance import reduce_harmonics
-from ..pantograph.interface import make_pantograph
+from ..pantograph.interface import make_pantograph, receptance
 from .loop import ConvergenceMonitor
 from .pair import PairedHil
 from .rig_loop import LOOP_CONNECTIONS, case_rig
@@ -72,13 +78,20 @@ def pair_reference_heights_m(case: Case) -> tuple[float, float]:
 
 
 def pair_iteration(case: Case, delay_steps: tuple[int, int]) -> PairedHil:
-    """The pair's iteration on ASM2 (models/catenary/asm/pair.py) with the case's HIL settings."""
+    """The pair's iteration on ASM2 (models/catenary/asm/pair.py) with the case's HIL settings, and the coupling
+    compensation from the case's pantograph model unless [second_pantograph] coupling_compensation is false."""
     check_pair_case(case)
     second = case.sections.second_pantograph
-    ops = pair_operators(case.catenary, case.speed_m_s, case.samples_per_span, case.dt_s, case.n_harmonics,
-                         second.spacing_m, second.position)
+    n = case.samples_per_span
+    spectra = pair_spectra(case.catenary, case.speed_m_s, n, case.dt_s, case.n_harmonics, second.spacing_m,
+                           second.position)
     z0 = np.array([reduce_harmonics(z, case.n_harmonics) for z in pair_profiles(case)])
-    return PairedHil(ops, z0, case.hil_settings(delay_steps[0]), delay_steps)
+    compensation = None
+    if second.coupling_compensation:
+        omega = 2 * np.pi * np.arange(case.n_harmonics) / (n * case.dt_s)
+        q = coupling_compensation(spectra, receptance(case.pantograph, omega))
+        compensation = (circulant_blocks(q, n, np.eye(2)), circulant_blocks(spectra @ q, n))
+    return PairedHil(circulant_blocks(spectra, n), z0, case.hil_settings(delay_steps[0]), delay_steps, compensation)
 
 
 def pair_outcome(outcomes: list) -> tuple[str, str] | None:

@@ -25,26 +25,49 @@ def second_offset_m(spacing_m: float, position: str) -> float:
     return -spacing_m if position == "trailing" else spacing_m
 
 
-def _circulant(spectrum: np.ndarray, samples_per_span: int) -> CirculantOperator:
-    spec = np.zeros(samples_per_span // 2 + 1, dtype=complex)
-    spec[:len(spectrum)] = spectrum
-    spec[0] = spec[0].real  # the response to a constant force is real; drop round-off
-    return CirculantOperator(np.fft.irfft(spec, n=samples_per_span))
-
-
 def pair_operators(cat: AsmParameters, speed_m_s: float, samples_per_span: int, dt_s: float, n_harmonics: int,
-                   spacing_m: float, position: str) -> tuple[tuple[CirculantOperator, CirculantOperator],
-                                                              tuple[CirculantOperator, CirculantOperator]]:
+                   spacing_m: float, position: str):
     """((I_11, I_12), (I_21, I_22)) at harmonics 0..n_harmonics-1, point 1 the first pantograph and point 2 the
     second (Paper A eqs. 15-17 sampled as in Paper B eqs. 6-11)."""
+    return circulant_blocks(pair_spectra(cat, speed_m_s, samples_per_span, dt_s, n_harmonics, spacing_m, position),
+                            samples_per_span)
+
+
+def pair_spectra(cat: AsmParameters, speed_m_s: float, samples_per_span: int, dt_s: float, n_harmonics: int,
+                 spacing_m: float, position: str) -> np.ndarray:
+    """S[k] = [[H11, H12], [H21, H22]] at w_k = 2 pi k / (N dt), k < n_harmonics (Paper A eqs. 15-17), shape
+    (n_harmonics, 2, 2): the pair's receptance matrix, point 1 the first pantograph."""
     omega = 2 * np.pi * np.arange(n_harmonics) / (samples_per_span * dt_s)
     direct = receptance_direct(cat, omega, speed_m_s)
     ahead = receptance_ahead(cat, omega, speed_m_s, spacing_m)  # at the point ahead, from the load behind
     behind = receptance_behind(cat, omega, speed_m_s, spacing_m)  # at the point behind, from the load ahead
-    second_behind = second_offset_m(spacing_m, position) < 0
-    h12, h21 = (ahead, behind) if second_behind else (behind, ahead)
-    d = _circulant(direct, samples_per_span)
-    return ((d, _circulant(h12, samples_per_span)), (_circulant(h21, samples_per_span), d))
+    h12, h21 = (ahead, behind) if second_offset_m(spacing_m, position) < 0 else (behind, ahead)
+    spectra = np.array([[direct, h12], [h21, direct]]).transpose(2, 0, 1)
+    spectra[0] = spectra[0].real  # the response to constant forces is real; drop round-off
+    return spectra
+
+
+def circulant_blocks(spectra: np.ndarray, samples_per_span: int, beyond: np.ndarray | None = None):
+    """((C_11, C_12), (C_21, C_22)): the circulant operators of 2 x 2 spectra given at the first harmonics,
+    `beyond` (2 x 2, default 0) at the others."""
+    full = np.zeros((samples_per_span // 2 + 1, 2, 2), dtype=complex)
+    if beyond is not None:
+        full[:] = beyond
+    full[:len(spectra)] = spectra
+    return tuple(tuple(CirculantOperator(np.fft.irfft(full[:, i, j], n=samples_per_span)) for j in range(2))
+                 for i in range(2))
+
+
+def coupling_compensation(spectra: np.ndarray, pantograph_receptance: np.ndarray) -> np.ndarray:
+    """Q[k] = (I + D[k] / H_p) (I + S[k] / H_p)^-1, D the diagonal of S: the force residuals of the pair mapped
+    so that the pair's iteration has the matrix of each contact point iterating alone (Q (I + S / H_p) =
+    I + D / H_p: the pantographs' steady response f = -z / H_p, Paper A eq. 18). With the pantographs' model
+    receptance H_p the cross coupling is compensated exactly; the fixed point does not depend on Q."""
+    eye = np.eye(2)
+    out = np.empty_like(spectra)
+    for k, (s, hp) in enumerate(zip(spectra, pantograph_receptance, strict=True)):
+        out[k] = (eye + np.diag(np.diag(s)) / hp) @ np.linalg.inv(eye + s / hp)
+    return out
 
 
 def pair_static_compliance_m_N(cat: AsmParameters, speed_m_s: float, spacing_m: float,
