@@ -3,6 +3,7 @@ the quantities the FMUs take derived from the case (speed, step, delay advance D
 from __future__ import annotations
 
 from pantohil.models.case import Case
+from pantohil.models.hil.pair_loop import check_pair_case, pair_delay_steps, pair_reference_heights_m
 from pantohil.models.parameters import fmu_values
 
 from .system import loop_latency_steps
@@ -12,7 +13,6 @@ def fmu_parameters(case: Case, delay_steps: int,
                    rig_address: tuple[str, int] = ("127.0.0.1", 47800)) -> dict[str, dict]:
     """The case as FMU parameter values, by FMU: every case key that reaches an FMU under its declared
     name (models/parameters.py), and the quantities the FMUs take derived from the case."""
-    case.refuse_second_pantograph("an FMU system")
     pan = case.pantograph
     resolved = {"hil.delay_steps": delay_steps, "pantograph.uplift_force_N": pan.uplift_force_N,
                 "pantograph.masses_kg": pan.masses_kg, "pantograph.stiffnesses_N_m": pan.stiffnesses_N_m,
@@ -26,7 +26,26 @@ def fmu_parameters(case: Case, delay_steps: int,
                     "local_host": case.sections.link.local_host, "key_file": case.sections.link.key_file,
                     "horizon_steps": case.horizon_steps},
     }
+    if case.sections.second_pantograph is not None:
+        derived["catenary"].update(pair_parameters(case))
+        derived["pantograph"]["reference_height"] = pair_reference_heights_m(case)[0]
     return {name: {**fmu_values(name, case.values, resolved), **extra} for name, extra in derived.items()}
+
+
+def pair_parameters(case: Case) -> dict:
+    """The catenary FMU's parameters of a second contact point (models/hil/pair.py), the second pantograph virtual
+    behind the master's two connections."""
+    check_pair_case(case)
+    second = case.sections.second_pantograph
+    return {"second_pantograph": 1, "second_spacing_m": second.spacing_m,
+            "second_position": ("trailing", "leading").index(second.position),
+            "coupling_compensation": int(second.coupling_compensation), "delay_steps_2": pair_delay_steps(case)[1]}
+
+
+def second_pantograph_parameters(case: Case) -> dict:
+    """The parameters the second pantograph's instance of the pantograph FMU takes beside the first's: its
+    reference height (each pantograph's mean force is the uplift force)."""
+    return {"reference_height": pair_reference_heights_m(case)[1]}
 
 
 def default_delay_steps(case: Case) -> int:

@@ -18,6 +18,15 @@ CONNECTIONS = (
     ("rig", "measured_force", "catenary", "contact_force"),
 )
 
+# Two pantographs, both virtual: a second instance of the pantograph FMU at the catenary's second contact point,
+# 2 connections on its loop (models/hil/pair_loop.py)
+PAIR_FMU_NAMES = (*FMU_NAMES, "pantograph_2")
+PAIR_CONNECTIONS = (
+    *CONNECTIONS,
+    ("catenary", "height_command_2", "pantograph_2", "height"),
+    ("pantograph_2", "contact_force", "catenary", "contact_force_2"),
+)
+
 # The catenary's horizon: the heights its next steps command as the iterate stands (docs/udp-protocol.md)
 HORIZON_OUTPUTS = tuple(f"height_ahead_{i}" for i in range(1, MAX_HORIZON_STEPS))
 

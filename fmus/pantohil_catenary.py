@@ -19,6 +19,7 @@ _spec.loader.exec_module(_binding)
 with _binding.own_package(globals()):
     from pantohil.fmus.fmu_support import PantohilSlave
     from pantohil.fmus.variables import Var, case_variables, register_all
+    from pantohil.models.catenary.asm.pair import POSITIONS, PairSpec
     from pantohil.models.catenary.grid import SpanGrid
     from pantohil.models.catenary.interface import CATENARIES
     from pantohil.models.catenary.pfem.model import MAX_DROPPERS
@@ -73,6 +74,24 @@ VARIABLES = [
         MAX_HORIZON_STEPS,
     ),
     Var("height_command", "real", "output", "m", "Contact-point height commanded D samples ahead", 0.0),
+    Var("second_pantograph", "integer", "parameter", "1", "1: a second contact point on the catenary, "
+        "second_spacing_m from the first (Paper A sec. 3.4; models/hil/pair.py); 0: one", 0, 0, 1),
+    Var("second_spacing_m", "real", "parameter", "m", "Distance L of the second contact point from the first",
+        200.0, 1e-3, 10_000.0),
+    Var("second_position", "integer", "parameter", "1", "Where the second runs: 0 behind the first (trailing), "
+        "1 ahead of it (leading)", 0, 0, 1),
+    Var("coupling_compensation", "integer", "parameter", "1", "1: the pair's force residuals through the coupling "
+        "compensation (resources/pantograph_receptance.csv); 0: the plain iteration", 1, 0, 1),
+    Var("delay_steps_2", "integer", "parameter", "1", "Delay advance D of the second contact point [steps]", 2, 0,
+        100_000),
+    Var("contact_force_2", "real", "input", "N", "Contact force at the second contact point; NaN: not measured",
+        0.0),
+    Var("height_command_2", "real", "output", "m", "Height commanded at the second contact point, its D ahead",
+        0.0),
+    Var("height_at_sample_2", "real", "output", "m", "Converging wire height at the second point, sample_index",
+        0.0),
+    Var("profile_at_sample_2", "real", "output", "m", "Static height z0 at the second point, sample_index", 0.0),
+    Var("force_at_sample_2", "real", "output", "N", "Force in use at the second point, sample_index", 0.0),
     *[
         Var(
             f"height_ahead_{i}",
@@ -150,7 +169,7 @@ class PantohilCatenary(PantohilSlave):
         """The parameters the built resources depend on: the sample grid and the profile, the rig's response
         file, and those the model's staged resources fix (its `structural_keys`)."""
         grid = ("speed", "time_step", "samples_per_span", "span_m", "catenary_model", "max_frequency_hz",
-                "rig_compensation")
+                "rig_compensation", "second_pantograph", "coupling_compensation")
         built = self._built.get("catenary_model")
         return grid if built is None else grid + CATENARIES.get(CATENARIES.name_of(built)).structural_keys
 
@@ -167,27 +186,48 @@ class PantohilCatenary(PantohilSlave):
         model = CATENARIES.get(CATENARIES.name_of(self.catenary_model, "catenary_model"))
         grid = SpanGrid(self.speed, self.time_step, n, self.harmonics, self.span_m)
         parameters = {name: getattr(self, name) for name in _PARAMETER_NAMES}
-        self._hil, z0 = model.iteration(grid, parameters, Path(self.resources), settings, comp)
+        if self.second_pantograph:
+            self._hil, z0 = self._pair_iteration(model, grid, parameters, settings, comp)
+        else:
+            self._hil, z0 = model.iteration(grid, parameters, Path(self.resources), settings, comp)
         self._z0 = np.asarray(z0, dtype=float)
         if getattr(self._hil, "nd", 0) > MAX_DROPPERS:
             raise ValueError(f"the catenary has {self._hil.nd} slackening droppers; this FMU reports at most "
                              f"{MAX_DROPPERS}")
         self._label = 0
         self._ahead = None
+        if self.second_pantograph:
+            ramped = self.ramp_steps > 0
+            self.height_command = 0.0 if ramped else float(self._hil.z[0, self.delay_steps % n])
+            self.height_command_2 = 0.0 if ramped else float(self._hil.z[1, int(self.delay_steps_2) % n])
+            return
         self.height_command = 0.0 if self.ramp_steps > 0 else self._hil.command_at(self._hil.z, self.delay_steps % n)
+
+    def _pair_iteration(self, model, grid, parameters, settings, comp):
+        """The iteration of two contact points, from a model that has one (`pair_iteration`)."""
+        if comp is not None or not hasattr(model, "pair_iteration"):
+            raise ValueError(f"{type(self).__name__}: second_pantograph = 1 needs a catenary model with two contact "
+                             "points (asm) and rig_compensation = 0")
+        pair = PairSpec(float(self.second_spacing_m), POSITIONS[int(self.second_position)],
+                        bool(self.coupling_compensation))
+        return model.pair_iteration(grid, parameters, Path(self.resources), settings,
+                                    (int(self.delay_steps), int(self.delay_steps_2)), pair)
 
     def do_step(self, current_time, step_size):
         """Take the measured force of this step and output the height to command (Paper D eqs. 2-3, 10)."""
         hil = self._hil
         self._label = hil.k % hil.n
-        self.height_command = hil.step(self.contact_force)
+        if self.second_pantograph:
+            self.height_command, self.height_command_2 = hil.step((self.contact_force, self.contact_force_2))
+        else:
+            self.height_command = hil.step(self.contact_force)
         self._ahead = None
         return True
 
     def height_ahead(self, i: int) -> float:
         """Output height_ahead_i: the command of the i-th next step as the iterate stands (Paper D eqs. 2-3
         with the delay advance, the hold and the ramp; `commands_ahead`); beyond the horizon, its last."""
-        if self._hil is None:
+        if self._hil is None or self.second_pantograph:  # no horizon for a pair (virtual pantographs only)
             return 0.0
         if self._ahead is None:
             self._ahead = self._hil.ahead(max(int(self.horizon_steps) - 1, 1)).tolist()
@@ -207,20 +247,44 @@ class PantohilCatenary(PantohilSlave):
         """Output: the virtual span b the last force belonged to."""
         return 0 if self._hil is None else max(self._hil.k - 1, 0) // self._hil.n
 
+    def _point(self, values: np.ndarray, point: int) -> float:
+        """A per-sample value of contact point `point` (0 the first) at sample_index; 0 before initialisation
+        or for a second point the catenary does not have."""
+        if self._hil is None:
+            return 0.0
+        if self.second_pantograph:
+            return float(values[point, self._label])
+        return 0.0 if point else float(values[self._label])
+
     @property
     def height_at_sample(self) -> float:
         """Output: the converging wire height at sample_index [m]."""
-        return 0.0 if self._hil is None else float(self._hil.z[self._label])
+        return self._point(self._hil.z if self._hil is not None else None, 0)
 
     @property
     def profile_at_sample(self) -> float:
         """Output: the static height z0 at sample_index [m]."""
-        return 0.0 if self._hil is None else float(self._z0[self._label])
+        return self._point(self._z0 if self._hil is not None else None, 0)
 
     @property
     def force_at_sample(self) -> float:
         """Output: the force in use at sample_index (the measured one, or the previous span's) [N]."""
-        return 0.0 if self._hil is None else float(self._hil.force_estimate[self._label])
+        return self._point(self._hil.force_estimate if self._hil is not None else None, 0)
+
+    @property
+    def height_at_sample_2(self) -> float:
+        """Output: the converging wire height at the second point at sample_index [m]."""
+        return self._point(self._hil.z if self._hil is not None else None, 1)
+
+    @property
+    def profile_at_sample_2(self) -> float:
+        """Output: the static height z0 at the second point at sample_index [m]."""
+        return self._point(self._z0 if self._hil is not None else None, 1)
+
+    @property
+    def force_at_sample_2(self) -> float:
+        """Output: the force in use at the second point at sample_index [N]."""
+        return self._point(self._hil.force_estimate if self._hil is not None else None, 1)
 
     @property
     def slack_droppers(self) -> int:

@@ -6,20 +6,18 @@ D sec. 3.4). The run stops by the rules of every run (models/hil/stop_rules.py),
 it converges when both have."""
 from __future__ import annotations
 
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from ..case import Case, CaseError
-from ..catenary.asm.pair import (
-    circulant_blocks,
-    coupling_compensation,
-    pair_spectra,
-    pair_static_compliance_m_N,
-    second_offset_m,
-)
-from ..catenary.receptance import reduce_harmonics
-from ..pantograph.interface import make_pantograph, receptance
+from ..catenary.asm.pair import PairSpec, pair_static_compliance_m_N, second_offset_m
+from ..catenary.grid import SpanGrid
+from ..catenary.interface import catenary_model
+from ..parameters import fmu_values
+from ..pantograph.interface import make_pantograph
 from .loop import ConvergenceMonitor
 from .pair import PairedHil
 from .rig_loop import LOOP_CONNECTIONS, case_rig
@@ -44,7 +42,7 @@ def check_pair_case(case: Case) -> None:
     second = case.sections.second_pantograph
     if second is None:
         raise CaseError("second_pantograph: the case has no [second_pantograph] section", key="second_pantograph")
-    if case.model != "asm":
+    if not hasattr(catenary_model(case), "pair_iteration"):
         raise CaseError(f"second_pantograph: two pantographs run on catenary.model = \"asm\" (not {case.model!r})",
                         key="second_pantograph")
     if case.compensates_rig_response:
@@ -77,21 +75,22 @@ def pair_reference_heights_m(case: Case) -> tuple[float, float]:
     return float(np.mean(z0[0]) + comp[0] * f_m), float(np.mean(z0[1]) + comp[1] * f_m)
 
 
-def pair_iteration(case: Case, delay_steps: tuple[int, int]) -> PairedHil:
-    """The pair's iteration on ASM2 (models/catenary/asm/pair.py) with the case's HIL settings, and the coupling
-    compensation from the case's pantograph model unless [second_pantograph] coupling_compensation is false."""
-    check_pair_case(case)
+def pair_spec(case: Case) -> PairSpec:
+    """The case's second contact point."""
     second = case.sections.second_pantograph
-    n = case.samples_per_span
-    spectra = pair_spectra(case.catenary, case.speed_m_s, n, case.dt_s, case.n_harmonics, second.spacing_m,
-                           second.position)
-    z0 = np.array([reduce_harmonics(z, case.n_harmonics) for z in pair_profiles(case)])
-    compensation = None
-    if second.coupling_compensation:
-        omega = 2 * np.pi * np.arange(case.n_harmonics) / (n * case.dt_s)
-        q = coupling_compensation(spectra, receptance(case.pantograph, omega))
-        compensation = (circulant_blocks(q, n, np.eye(2)), circulant_blocks(spectra @ q, n))
-    return PairedHil(circulant_blocks(spectra, n), z0, case.hil_settings(delay_steps[0]), delay_steps, compensation)
+    return PairSpec(second.spacing_m, second.position, second.coupling_compensation)
+
+
+def pair_iteration(case: Case, delay_steps: tuple[int, int]) -> PairedHil:
+    """The catenary FMU's pair iteration for the case (built from a staged folder as the FMU builds it:
+    models/catenary/asm/pair_iteration.py) with the case's HIL settings, and the coupling compensation from the
+    case's pantograph model unless [second_pantograph] coupling_compensation is false."""
+    check_pair_case(case)
+    model = catenary_model(case)
+    with tempfile.TemporaryDirectory(prefix="pantohil-catenary-") as folder:
+        model.stage(case, Path(folder), link=True)
+        return model.pair_iteration(SpanGrid.of_case(case), fmu_values("catenary", case.values), Path(folder),
+                                    case.hil_settings(delay_steps[0]), delay_steps, pair_spec(case))[0]
 
 
 def pair_outcome(outcomes: list) -> tuple[str, str] | None:

@@ -10,11 +10,19 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, single_pantograph
+from pantohil.models.catenary.asm.pair import (
+    PairSpec,
+    read_receptance_csv,
+    second_offset_m,
+    write_receptance_csv,
+)
+from pantohil.models.catenary.asm.pair_iteration import pair_iteration as asm_pair_iteration
 from pantohil.models.catenary.asm.string import AsmParameters, receptance_direct
 from pantohil.models.catenary.grid import SpanGrid
 from pantohil.models.catenary.profile import read_profile_csv, write_profile_csv
 from pantohil.models.catenary.receptance import CirculantOperator, asm_operator, reduce_harmonics
 from pantohil.models.hil.loop import PeriodicHil
+from pantohil.models.pantograph.interface import receptance
 
 PROFILE_FILE = "profile.csv"
 ASM_FIELDS = tuple(f.name for f in fields(AsmParameters))  # case keys of [catenary] = FMU parameters
@@ -23,6 +31,13 @@ ASM_FIELDS = tuple(f.name for f in fields(AsmParameters))  # case keys of [caten
 def staged_profile(grid: SpanGrid, resources: Path) -> np.ndarray:
     """The static height z0 at the grid's samples, from a staged profile.csv [m]."""
     return read_profile_csv(Path(resources) / PROFILE_FILE, grid.span_m).heights(grid.positions_m())
+
+
+def staged_pair_profiles(grid: SpanGrid, resources: Path, pair: PairSpec) -> np.ndarray:
+    """The static height at the grid's samples of both contact points, (2, N) [m], from a staged profile.csv."""
+    profile = read_profile_csv(Path(resources) / PROFILE_FILE, grid.span_m)
+    x = grid.positions_m()
+    return np.array([profile.heights(x), profile.heights(x + second_offset_m(pair.spacing_m, pair.position))])
 
 
 def stage_profile(case, folder: Path) -> list[Path]:
@@ -52,8 +67,14 @@ class AsmModel:
         return None
 
     def stage(self, case, folder: Path, link: bool = False) -> list[Path]:
-        """profile.csv."""
-        return stage_profile(case, folder)
+        """profile.csv; with a compensated second pantograph also the pantograph's receptance at the kept
+        harmonics (pantograph_receptance.csv, the pair's coupling compensation)."""
+        files = stage_profile(case, folder)
+        second = case.sections.second_pantograph
+        if second is not None and second.coupling_compensation:
+            omega = 2 * np.pi * np.arange(case.n_harmonics) / (case.samples_per_span * case.dt_s)
+            files.append(write_receptance_csv(folder, receptance(case.pantograph, omega)))
+        return files
 
     def iteration(self, grid: SpanGrid, parameters: Mapping[str, object], resources: Path, settings, compensation):
         """PeriodicHil on I_cc of ASM2 (compensated: I B, Paper D eq. 10)."""
@@ -63,6 +84,15 @@ class AsmModel:
         if compensation is not None:
             op = CirculantOperator(compensation.compensate_kernel(op.kernel))
         return PeriodicHil(op, reduce_harmonics(z0, grid.n_harmonics), settings, compensation), z0
+
+    def pair_iteration(self, grid: SpanGrid, parameters: Mapping[str, object], resources: Path, settings,
+                       delay_steps: tuple[int, int], pair: PairSpec):
+        """The iteration of two contact points (models/catenary/asm/pair_iteration.py) from a staged folder, and
+        the static heights of both (2, N)."""
+        cat = AsmParameters(**{f: float(parameters[f]) for f in ASM_FIELDS})
+        z0 = staged_pair_profiles(grid, resources, pair)
+        hp = read_receptance_csv(Path(resources), grid.n_harmonics) if pair.compensated else None
+        return asm_pair_iteration(cat, grid, z0, settings, delay_steps, pair, hp), z0
 
     def static_compliance_m_N(self, case) -> float:
         """H11(0) of the string (Paper A eq. 14)."""

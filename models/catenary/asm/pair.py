@@ -12,10 +12,24 @@ from __future__ import annotations
 
 import numpy as np
 
+from dataclasses import dataclass
+from pathlib import Path
+
 from pantohil.models.catenary.asm.string import AsmParameters, receptance_ahead, receptance_behind, receptance_direct
 from pantohil.models.catenary.receptance import CirculantOperator
 
 POSITIONS = ("trailing", "leading")  # where the second pantograph runs relative to the first
+RECEPTANCE_FILE = "pantograph_receptance.csv"  # staged for the catenary FMU's coupling compensation
+
+
+@dataclass(frozen=True)
+class PairSpec:
+    """The second contact point: its distance L from the first, where it runs, and whether the pair's coupling is
+    compensated (with the pantograph receptance at the kept harmonics)."""
+
+    spacing_m: float
+    position: str
+    compensated: bool = True
 
 
 def second_offset_m(spacing_m: float, position: str) -> float:
@@ -79,3 +93,22 @@ def pair_static_compliance_m_N(cat: AsmParameters, speed_m_s: float, spacing_m: 
     behind = float(np.real(receptance_behind(cat, 0.0, speed_m_s, spacing_m)))
     second_behind = second_offset_m(spacing_m, position) < 0
     return (direct + ahead, direct + behind) if second_behind else (direct + behind, direct + ahead)
+
+
+def write_receptance_csv(folder: Path, receptance_m_N: np.ndarray) -> Path:
+    """The pantograph's receptance at harmonics 0..N_h-1 as pantograph_receptance.csv (harmonic,re_m_N,im_m_N)."""
+    hp = np.asarray(receptance_m_N, dtype=complex)
+    np.savetxt(folder / RECEPTANCE_FILE, np.column_stack([np.arange(len(hp)), hp.real, hp.imag]), delimiter=",",
+               comments="", fmt="%.17g", header="harmonic,re_m_N,im_m_N")
+    return folder / RECEPTANCE_FILE
+
+
+def read_receptance_csv(folder: Path, n_harmonics: int) -> np.ndarray:
+    """The receptance of a staged pantograph_receptance.csv, which must hold harmonics 0..n_harmonics-1."""
+    table = np.atleast_2d(np.loadtxt(Path(folder) / RECEPTANCE_FILE, delimiter=",", skiprows=1))
+    if table.shape != (n_harmonics, 3) or not np.array_equal(table[:, 0], np.arange(n_harmonics)):
+        raise ValueError(f"{RECEPTANCE_FILE} does not hold harmonics 0..{n_harmonics - 1}")
+    hp = table[:, 1] + 1j * table[:, 2]
+    if not np.all(np.isfinite(hp)) or np.any(hp == 0):
+        raise ValueError(f"{RECEPTANCE_FILE}: a receptance is not a finite non-zero number")
+    return hp
