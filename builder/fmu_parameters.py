@@ -2,6 +2,7 @@
 the quantities the FMUs take derived from the case (speed, step, delay advance D, rig address)."""
 from __future__ import annotations
 
+from pantohil.fmus.pantohil_catenary import one_pantograph_parameters
 from pantohil.models.case import Case
 from pantohil.models.hil.pair_loop import check_pair_case, pair_delay_steps, pair_reference_heights_m
 from pantohil.models.parameters import fmu_values
@@ -29,6 +30,8 @@ def fmu_parameters(case: Case, delay_steps: int,
     if case.sections.second_pantograph is not None:
         derived["catenary"].update(pair_parameters(case))
         derived["pantograph"]["reference_height"] = pair_reference_heights_m(case)[0]
+    else:
+        derived["catenary"].update(one_pantograph_parameters())
     return {name: {**fmu_values(name, case.values, resolved), **extra} for name, extra in derived.items()}
 
 

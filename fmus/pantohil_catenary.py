@@ -133,6 +133,14 @@ VARIABLES = [
     ],
 ]
 _PARAMETER_NAMES = tuple(v.name for v in case_variables("catenary"))  # what a catenary model is built from
+SECOND_POINT_PARAMETERS = ("second_pantograph", "second_spacing_m", "second_position", "coupling_compensation",
+                           "delay_steps_2")
+SECOND_POINT_OUTPUTS = ("height_command_2", "height_at_sample_2", "profile_at_sample_2", "force_at_sample_2")
+
+
+def one_pantograph_parameters() -> dict:
+    """The second-point parameters of a catenary with one contact point: their declared start values."""
+    return {v.name: v.start for v in VARIABLES if v.name in SECOND_POINT_PARAMETERS}
 
 
 class PantohilCatenary(PantohilSlave):

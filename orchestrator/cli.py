@@ -561,6 +561,7 @@ def _cmd_build(args) -> int:
     from pantohil.orchestrator.output_paths import atomic_output_folder, check_output_file
 
     case = load_case(args.case, args.overrides)
+    case.refuse_second_pantograph("pantohil build")
     if args.out is None and args.ssp is None:
         raise CaseError("build: give --out DIR, --ssp FILE.ssp, or both")
     if args.ssp is not None:

@@ -28,6 +28,7 @@ from pantohil.builder.build_fmus import CLASS_NAMES
 from pantohil.builder.fmu_parameters import fmu_parameters
 from pantohil.builder.staging import stage_case_data
 from pantohil.builder.system import CONNECTIONS, FMU_NAMES
+from pantohil.fmus.pantohil_catenary import SECOND_POINT_OUTPUTS
 from pantohil.models.case import Case
 
 from .master import RecordingMaster
@@ -90,6 +91,7 @@ class InProcessMaster(RecordingMaster):
     def __init__(self, case: Case, connections, parameters: dict[str, dict], dt: float, capacity: int):
         if tuple(map(tuple, connections)) != CONNECTIONS:
             raise ValueError("the in-process engine steps the virtual HIL's own connections only")
+        case.refuse_second_pantograph("the in-process engine")
         self.dt = dt
         self.names = list(FMU_NAMES)
         self.slaves = create_slaves(case, parameters)
@@ -165,7 +167,8 @@ class InProcessMaster(RecordingMaster):
         cat = {"height_command": block[:, 0], "height_at_sample": block[:, 1], "force_at_sample": block[:, 2],
                "profile_at_sample": self._z0[labels], "sample_index": labels,
                "span_index": np.arange(k0, k0 + count) // self._hil.n,
-               "slack_droppers": np.count_nonzero(corrections, axis=1)}
+               "slack_droppers": np.count_nonzero(corrections, axis=1),
+               **{name: np.zeros(count) for name in SECOND_POINT_OUTPUTS}}  # one contact point (refused: two)
         for d in range(len([o for o in self.real_outputs["catenary"] if o.startswith("dropper_correction_")])):
             cat[f"dropper_correction_{d + 1}"] = corrections[:, d] if d < corrections.shape[1] else np.zeros(count)
         columns = {"catenary": cat, "rig": {"actuator_height": block[:, 3], "measured_force": block[:, 4]},
