@@ -123,7 +123,10 @@ def system_structure(name: str, fmus: dict[str, Path], parameters: dict[str, dic
     _units(ET.SubElement(root, _q(SSD, "Units")), units)
     experiment = ET.SubElement(root, _q(SSD, "DefaultExperiment"), {"startTime": "0.0",
                                                                      "stopTime": repr(float(stop_time_s))})
-    _oms_annotation(experiment, resultFile=f"{name}_res.csv", loggingInterval=repr(float(dt)))
+    # bufferSize and signalFilter: without them OMSimulator looks up an empty resource node (a logged error)
+    # and its Python API crashes at exit
+    _oms_annotation(experiment, resultFile=f"{name}_res.csv", loggingInterval=repr(float(dt)), bufferSize="1",
+                    signalFilter=".*")
     ET.indent(root)
     pset = _parameter_set(name, fmus, parameters)
     ET.indent(pset)
