@@ -32,7 +32,10 @@ def fmu_parameters(case: Case, delay_steps: int,
         derived["pantograph"]["reference_height"] = pair_reference_heights_m(case)[0]
     else:
         derived["catenary"].update(one_pantograph_parameters())
-    return {name: {**fmu_values(name, case.values, resolved), **extra} for name, extra in derived.items()}
+    values = {name: {**fmu_values(name, case.values, resolved), **extra} for name, extra in derived.items()}
+    if case.sections.second_pantograph is not None:  # the second instance of the pantograph FMU
+        values["pantograph_2"] = {**values["pantograph"], **second_pantograph_parameters(case)}
+    return values
 
 
 def pair_parameters(case: Case) -> dict:

@@ -1,5 +1,6 @@
 """System files for exchange: an SSP 1.0 package (SystemStructure.ssd + FMUs + parameter values in an
-.ssv + the case file) and an OspSystemStructure.xml for libcosim, both of the standard topology."""
+.ssv + the case file) and an OspSystemStructure.xml for libcosim, both of a case's topology (builder/system.py:
+one pantograph, or two as two instances of the pantograph FMU)."""
 from __future__ import annotations
 
 import math
@@ -95,8 +96,9 @@ def _units(parent: ET.Element, units: set[str]) -> None:
 
 
 def system_structure(name: str, fmus: dict[str, Path], parameters: dict[str, dict], stop_time_s: float,
-                     description: str, dt: float) -> tuple[bytes, bytes]:
-    """SystemStructure.ssd and parameters.ssv (bytes) for the FMUs of the standard topology."""
+                     description: str, dt: float, connections=CONNECTIONS) -> tuple[bytes, bytes]:
+    """SystemStructure.ssd and parameters.ssv (bytes): the components (`fmus`: component -> FMU file; two
+    components may instantiate one FMU) and their connections."""
     root = ET.Element(_q(SSD, "SystemStructureDescription"), {"version": "1.0", "name": name,
                                                               "generationTool": "pantohil"})
     system = ET.SubElement(root, _q(SSD, "System"), {"name": "hil", "description": description})
@@ -106,16 +108,16 @@ def system_structure(name: str, fmus: dict[str, Path], parameters: dict[str, dic
     units = set()
     for comp, path in fmus.items():
         c = ET.SubElement(elements, _q(SSD, "Component"), {"name": comp, "type": FMU_TYPE,
-                                                           "source": f"resources/{comp}.fmu"})
+                                                           "source": f"resources/{path.name}"})
         conns = ET.SubElement(c, _q(SSD, "Connectors"))
         for v in _variables(path):
             con = ET.SubElement(conns, _q(SSD, "Connector"), {"name": v.name, "kind": v.causality})
             attrs = {"unit": v.unit} if v.type == "Real" and v.unit else {}
             units.update(attrs.values())
             ET.SubElement(con, _q(SSC, v.type), attrs)
-    connections = ET.SubElement(system, _q(SSD, "Connections"))
-    for src, out, dst, inp in CONNECTIONS:
-        ET.SubElement(connections, _q(SSD, "Connection"), {"startElement": src, "startConnector": out,
+    wires = ET.SubElement(system, _q(SSD, "Connections"))
+    for src, out, dst, inp in connections:
+        ET.SubElement(wires, _q(SSD, "Connection"), {"startElement": src, "startConnector": out,
                                                           "endElement": dst, "endConnector": inp})
     _oms_annotation(system).append(ET.Element(_q(OMS, "FixedStepMaster"), {  # Jacobi, as pantohil's masters
         "description": "oms-ma", "stepSize": repr(float(dt)), "absoluteTolerance": "0.0001",
@@ -135,7 +137,8 @@ def system_structure(name: str, fmus: dict[str, Path], parameters: dict[str, dic
     return decl(root), decl(pset)
 
 
-def osp_system_structure(fmus: dict[str, Path], parameters: dict[str, dict], dt: float, fmu_dir: str = "") -> bytes:
+def osp_system_structure(fmus: dict[str, Path], parameters: dict[str, dict], dt: float, fmu_dir: str = "",
+                         connections=CONNECTIONS) -> bytes:
     """OspSystemStructure.xml: the same system for libcosim (Simulators, InitialValues, Connections)."""
     ET.register_namespace("", OSP)
     root = ET.Element(_q(OSP, "OspSystemStructure"), {"version": "0.1"})
@@ -144,7 +147,7 @@ def osp_system_structure(fmus: dict[str, Path], parameters: dict[str, dict], dt:
     ET.SubElement(root, _q(OSP, "Algorithm")).text = "fixedStep"
     sims = ET.SubElement(root, _q(OSP, "Simulators"))
     for comp, path in fmus.items():
-        sim = ET.SubElement(sims, _q(OSP, "Simulator"), {"name": comp, "source": f"{fmu_dir}{comp}.fmu",
+        sim = ET.SubElement(sims, _q(OSP, "Simulator"), {"name": comp, "source": f"{fmu_dir}{path.name}",
                                                          "stepSize": repr(float(dt))})
         values = parameters.get(comp, {})
         if values:
@@ -154,7 +157,7 @@ def osp_system_structure(fmus: dict[str, Path], parameters: dict[str, dict], dt:
                 iv = ET.SubElement(init, _q(OSP, "InitialValue"), {"variable": var})
                 ET.SubElement(iv, _q(OSP, kinds[var]), {"value": _fmt(kinds[var], value)})
     conns = ET.SubElement(root, _q(OSP, "Connections"))
-    for src, out, dst, inp in CONNECTIONS:
+    for src, out, dst, inp in connections:
         vc = ET.SubElement(conns, _q(OSP, "VariableConnection"))
         ET.SubElement(vc, _q(OSP, "Variable"), {"simulator": src, "name": out})
         ET.SubElement(vc, _q(OSP, "Variable"), {"simulator": dst, "name": inp})
@@ -163,22 +166,25 @@ def osp_system_structure(fmus: dict[str, Path], parameters: dict[str, dict], dt:
 
 
 def write_ssp(path: Path, name: str, fmus: dict[str, Path], parameters: dict[str, dict], case_text: str,
-              stop_time_s: float, dt: float, description: str) -> Path:
-    """Write FILE.ssp atomically, and OspSystemStructure.xml with the FMUs in a folder next to it."""
+              stop_time_s: float, dt: float, description: str, connections=CONNECTIONS) -> Path:
+    """Write FILE.ssp atomically, and OspSystemStructure.xml with the FMUs in a folder next to it; each FMU file
+    once, whatever the number of components that instantiate it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    ssd, ssv = system_structure(name, fmus, parameters, stop_time_s, description, dt)
+    ssd, ssv = system_structure(name, fmus, parameters, stop_time_s, description, dt, connections)
+    files = {Path(fmu).name: fmu for fmu in fmus.values()}
     with atomic_path(path) as part, zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("SystemStructure.ssd", ssd)
         z.writestr(PARAMETERS_RESOURCE, ssv)
         z.writestr(CASE_RESOURCE, case_text)
-        for comp, fmu in fmus.items():
-            z.write(fmu, f"resources/{comp}.fmu")
+        for file_name, fmu in files.items():
+            z.write(fmu, f"resources/{file_name}")
     osp_dir = path.parent / f"{path.stem}_osp"
     osp_dir.mkdir(exist_ok=True)
-    for comp, fmu in fmus.items():
-        shutil.copy2(fmu, osp_dir / f"{comp}.fmu")
-    (osp_dir / "OspSystemStructure.xml").write_bytes(osp_system_structure(fmus, parameters, dt))
+    for file_name, fmu in files.items():
+        shutil.copy2(fmu, osp_dir / file_name)
+    (osp_dir / "OspSystemStructure.xml").write_bytes(osp_system_structure(fmus, parameters, dt,
+                                                                          connections=connections))
     return path
 
 
@@ -372,9 +378,12 @@ def ssp_case(ssp: Path, system: dict, overrides: list[str]):
     of range; SspError for a parameter that no case gives."""
     from .fmu_parameters import default_delay_steps, fmu_parameters
 
+    parameters = system["parameters"]
+    if "pantograph_2" in system["fmus"] or parameters.get("catenary", {}).get("second_pantograph"):
+        raise CaseError(f"second_pantograph: pantohil run runs one pantograph; SSP file {ssp} has two (its OSP "
+                        "system structure runs in libcosim, the SSP in OMSimulator)", key="second_pantograph")
     raw, source = load_case_dict(system["case_file"])
     case = build_case(apply_overrides(raw, overrides), source)
-    parameters = system["parameters"]
     before = fmu_parameters(case, default_delay_steps(case))
     try:
         changes = _ssp_changes(case, parameters, before)

@@ -27,6 +27,17 @@ PAIR_CONNECTIONS = (
     ("pantograph_2", "contact_force", "catenary", "contact_force_2"),
 )
 
+
+
+def system_components(fmus: dict, two_pantographs: bool) -> tuple[dict, tuple]:
+    """The virtual HIL's components (component -> FMU file, from the built `fmus` by name) and connections:
+    with two pantographs the second is a second instance of the pantograph FMU."""
+    components = {n: fmus[n] for n in FMU_NAMES}
+    if not two_pantographs:
+        return components, CONNECTIONS
+    return {**components, "pantograph_2": fmus["pantograph"]}, PAIR_CONNECTIONS
+
+
 # The catenary's horizon: the heights its next steps command as the iterate stands (docs/udp-protocol.md)
 HORIZON_OUTPUTS = tuple(f"height_ahead_{i}" for i in range(1, MAX_HORIZON_STEPS))
 

@@ -561,15 +561,16 @@ def _cmd_build(args) -> int:
     from pantohil.orchestrator.output_paths import atomic_output_folder, check_output_file
 
     case = load_case(args.case, args.overrides)
-    case.refuse_second_pantograph("pantohil build")
     if args.out is None and args.ssp is None:
         raise CaseError("build: give --out DIR, --ssp FILE.ssp, or both")
     if args.ssp is not None:
         check_output_file(args.ssp, "--ssp")
     plan = delay_plan(case)
+    pair = case.sections.second_pantograph is not None
     with contextlib.ExitStack() as stack:
         if args.out is not None:
-            names = ("catenary", "rig", "pantograph", "adapter")
+            # the adapter is the rig link of one pantograph (a pair on a rig is not built yet)
+            names = ("catenary", "rig", "pantograph") + (() if pair else ("adapter",))
             folder = stack.enter_context(atomic_output_folder(args.out, "--out", args.overwrite))
         else:
             from pantohil.builder.system import FMU_NAMES
@@ -601,7 +602,8 @@ def _write_ssp(case, fmus: dict, args) -> None:
 
     in_ssp = {n: fmus[n] for n in FMU_NAMES}  # the virtual HIL: the adapter is for rigs
     ssp = make_ssp(case, in_ssp, args.ssp, args.overrides)
-    print(f"{ssp}: SSP of {len(in_ssp)} FMUs ({', '.join(in_ssp)}); OSP system structure in "
+    second = "; pantograph_2 a second instance of pantograph" if case.sections.second_pantograph is not None else ""
+    print(f"{ssp}: SSP of {len(in_ssp)} FMUs ({', '.join(in_ssp)}{second}); OSP system structure in "
           f"{ssp.parent / (ssp.stem + '_osp')}")
 
 

@@ -12,6 +12,7 @@ from pantohil.builder import build_fmus
 from pantohil.builder.fmu_parameters import fmu_parameters
 from pantohil.builder.model_description import pantohil_version
 from pantohil.builder.ssp import write_ssp
+from pantohil.builder.system import system_components
 from pantohil.models.case import Case, CaseError
 
 from .hil_run import run_case
@@ -34,8 +35,13 @@ def make_ssp(case: Case, fmus: dict[str, Path], path: Path, overrides: list[str]
     if overrides:  # an SSP carries the case as run, overrides included
         text += "\n# overrides given on the command line:\n" + "".join(f"# --set {o}\n" for o in overrides)
     n = case.samples_per_span
-    return write_ssp(path, case.name, fmus, params, text, case.sections.run.max_spans * n * case.dt_s, case.dt_s,
-                     f"pantohil HIL system of case {case.name}: catenary -> rig -> pantograph -> rig -> catenary")
+    pair = case.sections.second_pantograph is not None
+    components, connections = system_components(fmus, pair)
+    loop = "catenary -> rig -> pantograph -> rig -> catenary" + (", catenary -> pantograph_2 -> catenary" if pair
+                                                                 else "")
+    return write_ssp(path, case.name, components, {c: params[c] for c in components}, text,
+                     case.sections.run.max_spans * n * case.dt_s, case.dt_s,
+                     f"pantohil HIL system of case {case.name}: {loop}", connections)
 
 
 def make_package(case: Case, out_dir: Path, overrides: list[str], progress: bool = True) -> Path:

@@ -8,7 +8,7 @@ from conftest import pantohil
 PAIR = ("--set", "second_pantograph.spacing_m=200")
 
 
-@pytest.mark.parametrize("command", [("run",), ("stability",), ("build",)])
+@pytest.mark.parametrize("command", [("run",), ("stability",)])
 def test_a_command_for_one_pantograph_refuses_a_case_with_two(command, tmp_path):
     out = tmp_path / "out"
     done = pantohil(*command, *PAIR, "--out", str(out))
