@@ -203,8 +203,8 @@ class Case:
         """CaseError for a case with a [second_pantograph] given to `what`, which runs one pantograph: a
         result that leaves the second out is not the case's."""
         if self.sections.second_pantograph is not None:
-            raise CaseError(f"second_pantograph: {what} runs one pantograph; this case has two (two run in the "
-                            "in-process pair loop, models/hil/pair_loop.py, and `pantohil direct`)",
+            raise CaseError(f"second_pantograph: {what} runs one pantograph; this case has two (two run in "
+                            "`pantohil run`, a virtual HIL of FMUs, and in `pantohil direct`)",
                             key="second_pantograph")
 
     def reference_height_m(self) -> float:

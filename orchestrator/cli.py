@@ -394,6 +394,12 @@ def _print_run(result, out: Path) -> None:
         print(f"EN 50367, 20 Hz: mean +- 3 std {lp.stat_min_N:.1f} to {lp.stat_max_N:.1f} N, actual {lp.min_N:.1f} to "
               f"{lp.max_N:.1f} N, " + ("no contact loss for a rigid mass" if cf.contact_loss_pct is None
                                       else f"contact loss {cf.contact_loss_pct:.2f} % (raw)"))
+    second = result.second_pantograph
+    if second is not None:
+        f2 = second["contact_force"]
+        print(f"second pantograph ({second['position']}, {second['spacing_m']:g} m): mean {f2['mean_N']:.2f} N, std "
+              f"{f2['std_N']:.2f} N, 20 Hz std {f2['filtered_20hz']['std_N']:.2f} N, actual {f2['min_N']:.1f} to "
+              f"{f2['max_N']:.1f} N")
     if result.realtime is not None:
         rt = result.realtime
         late = rt["lateness_us"]

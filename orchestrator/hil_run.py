@@ -19,6 +19,8 @@ from contextlib import nullcontext, suppress
 from pathlib import Path
 
 from pantohil.builder.build_fmus import build_case_fmus
+from pantohil.builder.fmu_parameters import second_pantograph_parameters
+from pantohil.builder.system import system_components
 from pantohil.models.case import Case, CaseError
 from pantohil.models.catenary.interface import catenary_model
 from pantohil.models.hil.loop import ConvergenceMonitor
@@ -36,7 +38,7 @@ from .run_options import RunOptions, check_options
 from .run_state import PreparedRun, RunState
 from .run_stepping import end_observers, step_until_done
 from .run_summary import EXIT_LINK_LOST, RunSummary
-from .run_topology import VIRTUAL, Topology, delay_plan, run_topology
+from .run_topology import PAIR, VIRTUAL, Topology, delay_plan, run_topology
 from .stopping import StopRequest, stop_on_signals
 
 __all__ = ["EXIT_LINK_LOST", "RECORDED_SPANS", "RunInterrupted", "RunObserver", "RunOptions", "RunSummary",
@@ -117,6 +119,11 @@ def prepare(prepared: PreparedRun) -> None:
         prepared.fmus = _resumed_fmus(prepared)
         prepared.connections = prepared.topology.connections
         prepared.parameters = {"catenary": {"delay_steps": plan["delay_steps"]}}
+    elif options.system is None and prepared.topology.name == PAIR.name:
+        built = build_case_fmus(prepared.case, prepared.out_dir / "fmus", plan["delay_steps"])
+        prepared.fmus, prepared.connections = system_components(built, two_pantographs=True)
+        prepared.parameters = {"catenary": {"delay_steps": plan["delay_steps"]},
+                               "pantograph_2": second_pantograph_parameters(prepared.case)}
     elif options.system is None:
         prepared.fmus = build_case_fmus(prepared.case, prepared.out_dir / "fmus", plan["delay_steps"],
                                         prepared.topology.fmus, options.hardware or ("127.0.0.1", 47800))
@@ -195,6 +202,8 @@ def start(state: RunState) -> None:
         raise
     state.observers.insert(0, mcap)
     state.monitor = ConvergenceMonitor(case.samples_per_span, case.rig_period_spans())
+    if case.sections.second_pantograph is not None:
+        state.monitor_2 = ConvergenceMonitor(case.samples_per_span)  # virtual: no rig clock
     state.rules = StopRules.of_case(case)
     if options.resume is not None:
         try:

@@ -49,12 +49,16 @@ def write_json_atomic(path: Path, data: dict) -> None:
 
 
 def write_steady_span(path: Path, t: np.ndarray, z0: np.ndarray, z: np.ndarray, f: np.ndarray,
-                      speed_m_s: float) -> None:
+                      speed_m_s: float, second: tuple[np.ndarray, np.ndarray] | None = None) -> None:
     """Write steady_span.csv (`t_s,z0_m,z_m,f_N,x_m` over the converged span: x_m is the pantograph's
-    position in the span, v t), atomically."""
-    rows = "\n".join(f"{a:.6f},{b:.12e},{c:.12e},{d:.12e},{a * speed_m_s:.6f}"
-                     for a, b, c, d in zip(t, z0, z, f, strict=True))
-    write_text_atomic(path, "t_s,z0_m,z_m,f_N,x_m\n" + rows + "\n")
+    position in the span, v t; with two pantographs also `z2_m,f2_N`, the second's wire height and force),
+    atomically."""
+    columns = [t, z0, z, f, t * speed_m_s] + (list(second) if second is not None else [])
+    formats = ["{:.6f}", "{:.12e}", "{:.12e}", "{:.12e}", "{:.6f}", "{:.12e}", "{:.12e}"][:len(columns)]
+    line = ",".join(formats)
+    rows = "\n".join(line.format(*values) for values in zip(*columns, strict=True))
+    header = "t_s,z0_m,z_m,f_N,x_m" + (",z2_m,f2_N" if second is not None else "")
+    write_text_atomic(path, header + "\n" + rows + "\n")
 
 
 def plot_contact_force(path: Path, dt: float, spans: list[np.ndarray], reference: np.ndarray | None,

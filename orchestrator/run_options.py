@@ -6,6 +6,7 @@ import importlib
 from dataclasses import dataclass
 
 from pantohil.models.case import Case, CaseError
+from pantohil.models.hil.pair_loop import check_pair_case
 from pantohil.models.hil.stop_rules import StopRules
 
 from .inprocess import ENGINES
@@ -41,8 +42,8 @@ def is_rig_paced(case: Case, options: RunOptions) -> bool:
 
 def check_options(case: Case, options: RunOptions) -> None:
     """A request that cannot run: one CaseError naming the option or key, before anything is written."""
-    case.refuse_second_pantograph("pantohil run")
     master = MASTERS.get(options.master_kind, "master")
+    _check_pair(case, options)
     check_master_installed(options.master_kind)
     _check_engine(options)
     if options.log_writer not in LOG_WRITERS:
@@ -58,6 +59,18 @@ def check_options(case: Case, options: RunOptions) -> None:
     if duration_spans > run.max_spans:
         raise CaseError(f"run.duration_s: {run.duration_s:g} s is {duration_spans} spans, more than "
                         f"run.max_spans = {run.max_spans}")
+
+
+def _check_pair(case: Case, options: RunOptions) -> None:
+    """Two pantographs run as a virtual HIL of FMUs from its start (models/hil/pair_loop.py's checks): not on a rig,
+    not in the in-process engine, not resumed."""
+    if case.sections.second_pantograph is None:
+        return
+    for clash, given in (("--hardware", options.hardware is not None), ("--engine inprocess", options.engine != "fmu"),
+                         ("--resume", options.resume is not None)):
+        if given:
+            case.refuse_second_pantograph(f"pantohil run {clash}")
+    check_pair_case(case)
 
 
 def check_master_installed(master_kind: str) -> None:

@@ -39,10 +39,10 @@ def _statistics(f: np.ndarray, filtered: np.ndarray, contact: bool) -> ForceStat
     return ForceStatistics(**raw, filtered_20hz=ForceStatistics(**low))
 
 
-def _reference(case: Case, f: np.ndarray):
-    """The catenary model's reference steady force (ASM: the closed form, Paper A eqs. 38-41) and the run's
-    RMS distance to it; (None, None) if the model has none."""
-    found = catenary_model(case).reference_force(case)
+def _reference(case: Case, f: np.ndarray, found=None):
+    """The catenary model's reference steady force (ASM: the closed form, Paper A eqs. 38-41; `found`: another
+    (name, force) of the model's) and the run's RMS distance to it; (None, None) if the model has none."""
+    found = catenary_model(case).reference_force(case) if found is None else found
     if found is None:
         return None, None
     name, ref = found
@@ -91,12 +91,17 @@ def _last_span(state, spans_done: int, plots) -> dict:
     labels = master.column("catenary", "sample_index", start, stop)
     if not np.array_equal(labels, np.arange(n)):
         raise RuntimeError("catenary sample labels out of step with the master")
+    pair = _pair_columns(state, start, stop) if state.monitor_2 is not None else None
     report.write_steady_span(out_dir / "steady_span.csv", np.arange(n) * dt,
                              master.column("catenary", "profile_at_sample", start, stop),
-                             master.column("catenary", "height_at_sample", start, stop), f, case.speed_m_s)
+                             master.column("catenary", "height_at_sample", start, stop), f, case.speed_m_s,
+                             None if pair is None else (pair["z_m"], pair["f_N"]))
     filtered = lowpass_periodic(f, dt, FILTER_HZ)
     out = {"contact_force": _statistics(f, filtered, not pantograph_model(case.pantograph).fixed_to_actuator)}
-    ref, reference = _reference(case, f)
+    pair_refs = _pair_references(case, pair) if pair is not None else None
+    ref, reference = _reference(case, f, None if pair_refs is None else (pair_refs[0], pair_refs[1][0]))
+    if pair is not None:
+        out["second_pantograph"] = _second_summary(case, pair, pair_refs)
     if reference is not None:
         out["reference"] = reference
     if catenary_model(case).dropper_positions_m(case):
@@ -107,6 +112,45 @@ def _last_span(state, spans_done: int, plots) -> dict:
         report.plot_contact_force(out_dir / "contact_force.png", dt, overlay, ref, filtered,
                                   f"{case.title}: {case.speed_kmh:.0f} km/h, {state.status} after {spans_done} spans",
                                   case.speed_m_s)
+        if pair is not None:
+            second = case.sections.second_pantograph
+            report.plot_contact_force(
+                out_dir / "contact_force_2.png", dt,
+                [master.column("catenary", "force_at_sample_2", s * n, (s + 1) * n)
+                 for s in range(max(0, spans_done - 10), spans_done)],
+                None if pair_refs is None else pair_refs[1][1], lowpass_periodic(pair["f_N"], dt, FILTER_HZ),
+                f"{case.title}: second pantograph, {second.position} {second.spacing_m:g} m, {state.status} after "
+                f"{spans_done} spans", case.speed_m_s)
+    return out
+
+
+def _pair_columns(state, start: int, stop: int) -> dict:
+    """The second contact point's static and converging heights and force in use over steps start..stop."""
+    master = state.master
+    return {"z0_m": master.column("catenary", "profile_at_sample_2", start, stop),
+            "z_m": master.column("catenary", "height_at_sample_2", start, stop),
+            "f_N": master.column("catenary", "force_at_sample_2", start, stop)}
+
+
+def _pair_references(case: Case, pair: dict) -> tuple | None:
+    """(name, forces (2, N)) of the catenary model's closed form of the pair, or None if it has none."""
+    model = catenary_model(case)
+    if not hasattr(model, "pair_reference_forces"):
+        return None
+    first_z0 = case.profile.heights(case.sample_positions_m())
+    return model.pair_reference_forces(case, np.array([first_z0, pair["z0_m"]]))
+
+
+def _second_summary(case: Case, pair: dict, pair_refs: tuple | None) -> dict:
+    """summary.json's second_pantograph: where it runs, its model, its force statistics (EN 50367) and its
+    distance to the pair's closed form."""
+    second, f2 = case.sections.second_pantograph, pair["f_N"]
+    out = {"spacing_m": second.spacing_m, "position": second.position,
+           "coupling_compensation": second.coupling_compensation, "pantograph": _pantograph_summary(case),
+           "contact_force": _statistics(f2, lowpass_periodic(f2, case.dt_s, FILTER_HZ),
+                                        not pantograph_model(case.pantograph).fixed_to_actuator).to_dict()}
+    if pair_refs is not None:
+        out["reference"] = _reference(case, f2, (pair_refs[0], pair_refs[1][1]))[1]
     return out
 
 

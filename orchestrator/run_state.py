@@ -42,6 +42,7 @@ class RunState:
     observers: list
     master: object = None
     monitor: ConvergenceMonitor | None = None
+    monitor_2: ConvergenceMonitor | None = None  # two pantographs: the second contact point's
     rules: StopRules | None = None  # when the run stops (models/hil/stop_rules.py)
     pacer: Pacer | None = None
     bar: object = None

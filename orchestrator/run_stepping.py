@@ -67,13 +67,18 @@ def step_until_done(state: RunState) -> None:
         end_stepping(state)
 
 
+_POINTS = (("force_at_sample", "height_command"), ("force_at_sample_2", "height_command_2"))  # per contact point
+
+
 def _limits(state: RunState):
-    """Where the force in use, the height command and (on a rig) the link state are among the outputs."""
+    """Where the force in use and the height command of each contact point, and (on a rig) the link state, are
+    among the outputs: ([(force index, height index, force name, height name)], link column)."""
     master = state.master
     cat = master.real_outputs["catenary"]
     link_col = (master.int_outputs["adapter"].index("link_state") if state.prepared.options.hardware is not None
                 else None)
-    return cat.index("force_at_sample"), cat.index("height_command"), link_col
+    points = _POINTS[:2 if state.monitor_2 is not None else 1]
+    return [(cat.index(f), cat.index(z), f, z) for f, z in points], link_col
 
 
 def _diverged_at(state: RunState, k: int, span: int, force_N: float, height_m: float) -> _Stop:
@@ -87,7 +92,7 @@ def _steps(state: RunState, span: int) -> str | None:
     back a block of steps at a time)."""
     master, pacer, stop = state.master, state.pacer, state.stop
     limits = _limits(state)
-    i_f, i_z, _ = limits
+    i_f, i_z = limits[0][0][:2]
     step_observers = [o for o in state.observers if o.wants_steps]
     end = (span + 1) * state.case.samples_per_span
     if pacer is None and not step_observers and master.steps_a_span_at_once:  # the in-process engine
@@ -119,19 +124,21 @@ def _check_steps(state: RunState, span: int, k0: int, k1: int, limits: tuple) ->
     """Stop the run if a step of k0..k1-1 left run.force_limit_N or run.height_limit_m (or went NaN), or
     the link is in fault after it."""
     master, dt, rules = state.master, state.case.dt_s, state.rules
-    i_f, i_z, link_col = limits
+    points, link_col = limits
     if k1 - k0 == 1:  # one step (the common case of the fmpy master): no arrays
         out = master.values["catenary"]
-        if rules.beyond(out[i_f], out[i_z]):
-            raise _diverged_at(state, k1, span, out[i_f], out[i_z])
+        for i_f, i_z, _, _ in points:
+            if rules.beyond(out[i_f], out[i_z]):
+                raise _diverged_at(state, k1, span, out[i_f], out[i_z])
         fault = link_col is not None and master.int_value("adapter", "link_state", k0) == LINK_FAULT
         k = k0
     else:
-        force = master.column("catenary", "force_at_sample", k0, k1)
-        height = master.column("catenary", "height_command", k0, k1)
-        i = rules.first_beyond(force, height)
-        if i is not None:
-            raise _diverged_at(state, k0 + i + 1, span, force[i], height[i])
+        for _, _, f_name, z_name in points:
+            force = master.column("catenary", f_name, k0, k1)
+            height = master.column("catenary", z_name, k0, k1)
+            i = rules.first_beyond(force, height)
+            if i is not None:
+                raise _diverged_at(state, k0 + i + 1, span, force[i], height[i])
         faults = master.column("adapter", "link_state", k0, k1) == LINK_FAULT if link_col is not None else None
         fault = faults is not None and bool(faults.any())
         k = k0 + int(np.argmax(faults)) if fault else k0
@@ -160,8 +167,11 @@ def step_span(state: RunState, span: int) -> tuple[str, str] | None:
         observer.on_span(state, span, rec)
     state.bar.update(1)
     state.bar.set_postfix(change=f"{rec['change']:.2e}", mean=f"{rec['mean_N']:.1f}", std=f"{rec['std_N']:.2f}")
-    fmu, output = state.topology.contact_force
-    if not master.column(fmu, output, start, start + n).any():
+    if state.monitor_2 is not None:  # two pantographs: the pair converges when both contact points do
+        second = state.monitor_2.close_span(span, master.column("catenary", "force_at_sample_2", start, start + n))
+        rec["change"] = max(rec["change"], second["change"])
+        rec["second"] = {k: second[k] for k in ("change", "mean_N", "std_N", "max_N", "min_N")}
+    if not all(master.column(fmu, output, start, start + n).any() for fmu, output in state.topology.contact_forces):
         return state.rules.after_span(span, rec, state.monitor, contact=False)
     if measured is not None:
         data_failed = _data_failed(state, span, rec["measured"])

@@ -95,6 +95,9 @@ class RunSummary:
     contact_force: ForceStatistics | None = None
     reference: dict | None = None
     droppers: dict | None = None
+    # two pantographs: the second's spacing, position, model, force statistics and closed form (contact_force and
+    # reference stay the first's)
+    second_pantograph: dict | None = None
 
     @property
     def converged(self) -> bool:

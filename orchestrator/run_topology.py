@@ -11,6 +11,8 @@ from pantohil.builder.system import (
     HARDWARE_CONNECTIONS,
     HARDWARE_FMU_NAMES,
     HORIZON_OUTPUTS,
+    PAIR_CONNECTIONS,
+    PAIR_FMU_NAMES,
     loop_latency_steps,
 )
 from pantohil.fmus import link_client
@@ -33,14 +35,26 @@ class Topology:
     fmus: tuple
     connections: tuple
     groups: dict  # MCAP topic -> {signal: description}; topic "/x" logs FMU x
-    contact_force: tuple  # (FMU, output) of the contact force: a span of zeros is a lost contact
+    contact_forces: tuple  # (FMU, output) of each contact force: a span of zeros in one is a lost contact
 
 
 VIRTUAL = Topology("virtual", FMU_NAMES, CONNECTIONS, {
     "/catenary": _CATENARY_GROUP,
     "/rig": {"actuator_height": "actuator height [m]", "measured_force": "measured force [N]"},
     "/pantograph": {"contact_force": "contact force [N]", "head_height": "head height [m]"},
-}, ("pantograph", "contact_force"))
+}, (("pantograph", "contact_force"),))
+# Two pantographs, both virtual (Paper A sec. 3.4): the second an instance of the pantograph FMU at the catenary's
+# second contact point (models/hil/pair.py)
+PAIR = Topology("pair", PAIR_FMU_NAMES, PAIR_CONNECTIONS, {
+    "/catenary": {**_CATENARY_GROUP, "height_command_2": "commanded height at the second contact point [m]",
+                  "contact_force_2": "force received from the second pantograph [N]",
+                  "force_at_sample_2": "force in use at the second point's sample [N]",
+                  "height_at_sample_2": "converging height at the second point's sample [m]",
+                  "profile_at_sample_2": "static height z0 at the second point's sample [m]"},
+    **{g: VIRTUAL.groups[g] for g in ("/rig", "/pantograph")},
+    "/pantograph_2": {"contact_force": "second pantograph's contact force [N]",
+                      "head_height": "second pantograph's head height [m]"},
+}, (("pantograph", "contact_force"), ("pantograph_2", "contact_force")))
 HARDWARE = Topology("hardware", HARDWARE_FMU_NAMES, HARDWARE_CONNECTIONS, {
     "/catenary": _CATENARY_GROUP,
     "/adapter": {"command_sent": "height sent, within the actuator limits [m]",
@@ -48,7 +62,7 @@ HARDWARE = Topology("hardware", HARDWARE_FMU_NAMES, HARDWARE_CONNECTIONS, {
                  "actuator_height": "actuator height reported by the rig [m]",
                  "link_state": "0 ok, 1 missing, 2 fault", **{c: "[-]" for c in link_client.COUNTERS},
                  **{c: f"{text} [-]" for c, text in link_client.TICK_COUNTS.items()}},
-}, ("adapter", "measured_force"))
+}, (("adapter", "measured_force"),))
 RIG_PACED_FIELDS = {"answer_time": "rig-paced: from the sample reaching the socket to the answer [s]",
                     **{c: f"{text} [-]" for c, text in link_client.RIG_PACED_COUNTERS.items()}}
 
@@ -81,6 +95,8 @@ def _delay_refusal(case: Case, loop: int, d: int, hardware: bool) -> str:
 def run_topology(case: Case, options: RunOptions) -> Topology:
     """The loop of the run (a hardware run connects only the horizon's H - 1 heights), with the rig-paced
     link's fields and, for a slackening PFEM, the dropper corrections logged."""
+    if case.sections.second_pantograph is not None:  # virtual only (run_options.check_options)
+        return PAIR
     topology = HARDWARE if options.hardware is not None else VIRTUAL
     if options.hardware is not None:
         ahead = set(HORIZON_OUTPUTS[case.horizon_steps - 1:])

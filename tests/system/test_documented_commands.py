@@ -31,6 +31,7 @@ SHORT = {  # a command's first words -> overrides that keep it short (the comman
     "pantohil run --hardware": "--set run.max_spans=3",
     "pantohil run paper_b_mass_300 --hardware": "--set run.max_spans=3",
     "pantohil run --master libcosim": "--set run.max_spans=3",
+    "pantohil run --set second_pantograph.spacing_m=200": "--set run.max_spans=3",
 }
 READY = {"pantohil rig-emulator": ("stdout", "listening on"), "dask scheduler": ("stderr", "Scheduler at"),
          "dask worker": ("stderr", "Registered to")}
@@ -68,6 +69,10 @@ EXPECT = {
     "pantohil rig-identify --hardware 127.0.0.1:47800 --case paper_b_mass_300 --out paper_b_identified.toml":
         Expect(files=("paper_b_identified.toml",)),
     'pantohil run paper_b_mass_300 --set "rig.file=\\"$PWD/paper_b_identified.toml\\""': Expect(),
+    "pantohil run --set second_pantograph.spacing_m=200 --set hil.max_frequency_hz=10 --out runs/pair":
+        Expect((1,), ("runs/pair/summary.json", "runs/pair/contact_force_2.png")),
+    "pantohil build --set second_pantograph.spacing_m=200 --ssp pair.ssp": Expect(files=("pair.ssp",)),
+    "pantohil direct --set second_pantograph.spacing_m=200": Expect(),
     "pantohil sweep speed_200_300 --scheduler tcp://127.0.0.1:8786 --out sweeps/speed":
         Expect(files=("sweeps/speed/results.csv", "sweeps/speed/summary.json")),
 }

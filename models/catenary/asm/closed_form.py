@@ -95,6 +95,25 @@ def two_pantographs(cat: AsmParameters, pan: PantographParameters, speed: float,
     return SteadyState(freq, f1), SteadyState(freq, f2)
 
 
+def pair_forces(cat: AsmParameters, pan: PantographParameters, speed: float, dt_s: float, z0_pair: np.ndarray,
+                mean_force_N: float, n_harmonics: int, spacing_m: float, second_leading: bool) -> np.ndarray:
+    """Each contact point's steady force at its own N samples of a span, shape (2, N) [N]: Paper A eqs. (24)-(25)
+    with the heights each point passes (`z0_pair`, first and second, as models/hil/pair_loop.py samples them);
+    the receptance at one point from the other's load is H12 (ahead) for the leading point, H21 (behind) for the
+    trailing one."""
+    n = z0_pair.shape[1]
+    z = [one_sided_harmonics(row) for row in z0_pair]
+    f = np.zeros((2, n_harmonics), dtype=complex)
+    f[:, 0] = mean_force_N
+    for j in range(1, n_harmonics):
+        w = 2 * np.pi * j / (n * dt_s)
+        direct = -receptance(pan, w)[0] - receptance_direct(cat, w, speed)
+        ahead, behind = receptance_ahead(cat, w, speed, spacing_m), receptance_behind(cat, w, speed, spacing_m)
+        at_first, at_second = (behind, ahead) if second_leading else (ahead, behind)
+        f[:, j] = np.linalg.solve([[direct, -at_first], [-at_second, direct]], [z[0][j], z[1][j]])
+    return np.array([synthesize(f[p], n) for p in range(2)])
+
+
 def optimal_spacings(cat: AsmParameters, pan: PantographParameters, speed: float, omega: float,
                      max_spacing_m: float) -> list[float]:
     """Spacings that minimise the trailing pantograph's harmonic at omega, Paper A eqs. (43)-(45)."""

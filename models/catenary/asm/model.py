@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, single_pantograph
+from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, pair_forces, single_pantograph
 from pantohil.models.catenary.asm.pair import (
     PairSpec,
     read_receptance_csv,
@@ -113,3 +113,11 @@ class AsmModel:
     def reference_force(self, case):
         """The closed form (Paper A eqs. 38-41)."""
         return "asm closed form (Paper A eqs. 38-41), same harmonics", closed_form_reference(case)
+
+    def pair_reference_forces(self, case, z0_pair: np.ndarray):
+        """The closed form of two pantographs (Paper A eqs. 24-25) at each point's samples, shape (2, N)."""
+        second = case.sections.second_pantograph
+        forces = pair_forces(case.catenary, case.pantograph, case.speed_m_s, case.dt_s, z0_pair,
+                             case.pantograph.uplift_force_N, case.n_harmonics, second.spacing_m,
+                             second.position == "leading")
+        return "asm closed form of two pantographs (Paper A eqs. 24-25), same harmonics", forces
