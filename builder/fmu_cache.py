@@ -15,7 +15,7 @@ from pantohil.models.storage import atomic_path, cache_folder, cache_root, write
 
 from . import loader
 
-BUILDER_VERSION = "15"
+BUILDER_VERSION = "16"
 MAX_FMU_BYTES = 256 * 1024 * 1024  # a cache entry read to check its digest (a built FMU is about 4 MB)
 
 

@@ -14,11 +14,13 @@ CAPABILITIES = {"canHandleVariableCommunicationStepSize": "false", "canGetAndSet
                 "canSerializeFMUstate": "true"}
 
 
-def _declare_behaviour(root: ET.Element, experiment: tuple[float, float]) -> None:
+def _declare_behaviour(root: ET.Element, experiment: tuple[float, float], variables) -> None:
     """Capabilities, DefaultExperiment and ModelStructure as they are. Outputs: computed in doStep from
     the inputs of the step before (dependencies=""), and computed during initialisation (the pantograph
     settles on its input height, the catenary commands its first height), hence initial="calculated",
-    listed in InitialUnknowns (depending on everything set before: no dependencies attribute)."""
+    listed in InitialUnknowns with their dependencies there: the parameters (knowns with initial="exact")
+    and the inputs each declares (`Var.initial_inputs`), so that a master sees no algebraic loop at
+    initialisation where there is none."""
     for key, value in CAPABILITIES.items():
         root.find("CoSimulation").set(key, value)
     step_s, stop_s = experiment
@@ -38,7 +40,20 @@ def _declare_behaviour(root: ET.Element, experiment: tuple[float, float]) -> Non
         structure.remove(old)
     initial = ET.SubElement(structure, "InitialUnknowns")
     for unknown in outputs.iter("Unknown"):
-        ET.SubElement(initial, "Unknown", {"index": unknown.get("index")})
+        ET.SubElement(initial, "Unknown", {"index": unknown.get("index"),
+                                           "dependencies": " ".join(map(str, _initial_dependencies(
+                                               root, variables, int(unknown.get("index")))))})
+
+
+def _initial_dependencies(root: ET.Element, variables, index: int) -> list[int]:
+    """The knowns an output (1-based `index`) depends on at initialisation, ascending: every parameter and the
+    inputs its declaration names (all of them for None)."""
+    by_name = {v.name: v for v in variables}
+    scalars = list(root.find("ModelVariables").iter("ScalarVariable"))
+    wanted = by_name[scalars[index - 1].get("name")].initial_inputs
+    return [i for i, sv in enumerate(scalars, start=1)
+            if sv.get("causality") == "parameter"
+            or (sv.get("causality") == "input" and (wanted is None or sv.get("name") in wanted))]
 
 
 def decorate_model_description(xml_bytes: bytes, variables, experiment: tuple[float, float], identity: str) -> bytes:
@@ -52,7 +67,7 @@ def decorate_model_description(xml_bytes: bytes, variables, experiment: tuple[fl
     root.set("generationTool", f"pantohil {pantohil_version()} with {root.get('generationTool')}")
     root.set("guid", str(uuid.uuid5(uuid.NAMESPACE_URL, f"pantohil-fmu:{identity}")))
     root.attrib.pop("generationDateAndTime", None)
-    _declare_behaviour(root, experiment)
+    _declare_behaviour(root, experiment, variables)
     by_name = {v.name: v for v in variables}
     used = sorted({v.unit for v in variables if v.kind == "real"})
     units = ET.Element("UnitDefinitions")

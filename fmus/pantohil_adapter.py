@@ -106,6 +106,8 @@ VARIABLES = [
     ),
 ]
 
+# a rig's first answer may come during initialisation: every output may depend on every input then
+VARIABLES = [dataclasses.replace(v, initial_inputs=None) if v.causality == "output" else v for v in VARIABLES]
 _AHEAD_INPUTS = tuple(f"height_ahead_{i}" for i in range(1, MAX_HORIZON_STEPS))
 _LINK_OUTPUTS = ("measured_force", "actuator_height", "command_sent", "rig_latency_steps", "rig_refusal")
 

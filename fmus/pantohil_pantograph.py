@@ -30,9 +30,12 @@ VARIABLES = [
     ),
     Var("time_step", "real", "parameter", "s", "Integration step dt (equal to the communication step)", 0.001, 1e-6),
     Var("height", "real", "input", "m", "Actuator (contact-point) height at the end of the step", 0.0),
-    Var("contact_force", "real", "output", "N", "Contact force on the wire (load-cell reading without the rig)", 0.0),
-    Var("head_height", "real", "output", "m", "Height of the head (mass 1)", 0.0),
-    Var("in_contact", "boolean", "output", "1", "True while the head touches the wire", True),
+    # the pantograph settles on the height it is given
+    Var("contact_force", "real", "output", "N", "Contact force on the wire (load-cell reading without the rig)", 0.0,
+        initial_inputs=("height",)),
+    Var("head_height", "real", "output", "m", "Height of the head (mass 1)", 0.0, initial_inputs=("height",)),
+    Var("in_contact", "boolean", "output", "1", "True while the head touches the wire", True,
+        initial_inputs=("height",)),
 ]
 
 

@@ -30,7 +30,8 @@ VARIABLES = [
         "(with force_offset, noise_std, noise_seed)", 0, 0, 1),
     Var("height_command", "real", "input", "m", "Height commanded by the catenary model", 0.0),
     Var("true_force", "real", "input", "N", "Contact force at the pantograph", 0.0),
-    Var("actuator_height", "real", "output", "m", "Height reached by the actuator", 0.0),
+    Var("actuator_height", "real", "output", "m", "Height reached by the actuator", 0.0,
+        initial_inputs=("height_command",)),  # the actuator starts where it is commanded
     Var("measured_force", "real", "output", "N", "Force as measured by the load cell", 0.0),
     Var("latency_steps", "integer", "output", "1", "Rig latency in whole steps, for the delay advance", 0),
 ]

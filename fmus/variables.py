@@ -42,6 +42,9 @@ class Var:
     start: float | int | bool = 0
     min: float | None = None
     max: float | None = None
+    # an output's inputs at initialisation (FMI 2.0 InitialUnknowns dependencies; None: every input): what the
+    # value it has after exitInitializationMode depends on besides the parameters
+    initial_inputs: tuple[str, ...] | None = ()
 
 
 def _key_variables(key: Key) -> list[Var]:

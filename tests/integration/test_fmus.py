@@ -54,6 +54,18 @@ def test_model_descriptions_state_step_state_and_dependencies(built):
         assert [u.get("index") for u in root.iterfind("ModelStructure/Outputs/Unknown")] == outputs
         assert all(u.get("dependencies") == "" for u in root.iterfind("ModelStructure/Outputs/Unknown"))
         assert [u.get("index") for u in root.iterfind("ModelStructure/InitialUnknowns/Unknown")] == outputs
+        # at initialisation: every parameter, and only the inputs the output declares (the rig and the pantograph
+        # settle on the height they are given): the virtual HIL has no algebraic loop at initialisation
+        parameters = {str(i + 1) for i, sv in enumerate(variables) if sv.get("causality") == "parameter"}
+        for unknown in root.iterfind("ModelStructure/InitialUnknowns/Unknown"):
+            known = set(unknown.get("dependencies").split())
+            assert parameters <= known, name
+            inputs = sorted(variables[int(i) - 1].get("name") for i in known - parameters)
+            declared = {("rig", "actuator_height"): ["height_command"], ("pantograph", "contact_force"): ["height"],
+                        ("pantograph", "head_height"): ["height"], ("pantograph", "in_contact"): ["height"]}
+            output = variables[int(unknown.get("index")) - 1].get("name")
+            if name != "adapter":  # the adapter: every input (a rig may answer during initialisation)
+                assert inputs == declared.get((name, output), []), (name, output)
         assert all(variables[int(i) - 1].get("initial") == "calculated" for i in outputs)
         assert all(sv.get("name") != "model" and sv.get("name").replace("_", "").isalnum() for sv in variables)
 
