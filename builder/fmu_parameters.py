@@ -29,7 +29,6 @@ def fmu_parameters(case: Case, delay_steps: int,
     }
     if case.sections.second_pantograph is not None:
         derived["catenary"].update(pair_parameters(case))
-        derived["pantograph"]["reference_height"] = pair_reference_heights_m(case)[0]
     else:
         derived["catenary"].update(one_pantograph_parameters())
     values = {name: {**fmu_values(name, case.values, resolved), **extra} for name, extra in derived.items()}

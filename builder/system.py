@@ -20,12 +20,13 @@ CONNECTIONS = (
 
 # Two pantographs, both virtual: a second instance of the pantograph FMU at the catenary's second contact point,
 # 2 connections on its loop (models/hil/pair_loop.py)
-PAIR_FMU_NAMES = (*FMU_NAMES, "pantograph_2")
-PAIR_CONNECTIONS = (
-    *CONNECTIONS,
-    ("catenary", "height_command_2", "pantograph_2", "height"),
-    ("pantograph_2", "contact_force", "catenary", "contact_force_2"),
+SECOND_PANTOGRAPH = "pantograph_2"
+SECOND_PANTOGRAPH_CONNECTIONS = (
+    ("catenary", "height_command_2", SECOND_PANTOGRAPH, "height"),
+    (SECOND_PANTOGRAPH, "contact_force", "catenary", "contact_force_2"),
 )
+PAIR_FMU_NAMES = (*FMU_NAMES, SECOND_PANTOGRAPH)
+PAIR_CONNECTIONS = (*CONNECTIONS, *SECOND_PANTOGRAPH_CONNECTIONS)
 
 
 
@@ -35,7 +36,12 @@ def system_components(fmus: dict, two_pantographs: bool) -> tuple[dict, tuple]:
     components = {n: fmus[n] for n in FMU_NAMES}
     if not two_pantographs:
         return components, CONNECTIONS
-    return {**components, "pantograph_2": fmus["pantograph"]}, PAIR_CONNECTIONS
+    return with_second_pantograph(components, fmus), PAIR_CONNECTIONS
+
+
+def with_second_pantograph(components: dict, fmus: dict) -> dict:
+    """`components` and the second pantograph, an instance of the built pantograph FMU (`fmus["pantograph"]`)."""
+    return {**components, SECOND_PANTOGRAPH: fmus["pantograph"]}
 
 
 # The catenary's horizon: the heights its next steps command as the iterate stands (docs/udp-protocol.md)

@@ -235,7 +235,7 @@ class PantohilCatenary(PantohilSlave):
     def height_ahead(self, i: int) -> float:
         """Output height_ahead_i: the command of the i-th next step as the iterate stands (Paper D eqs. 2-3
         with the delay advance, the hold and the ramp; `commands_ahead`); beyond the horizon, its last."""
-        if self._hil is None or self.second_pantograph:  # no horizon for a pair (virtual pantographs only)
+        if self._hil is None:
             return 0.0
         if self._ahead is None:
             self._ahead = self._hil.ahead(max(int(self.horizon_steps) - 1, 1)).tolist()

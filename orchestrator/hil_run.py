@@ -20,7 +20,7 @@ from pathlib import Path
 
 from pantohil.builder.build_fmus import build_case_fmus
 from pantohil.builder.fmu_parameters import second_pantograph_parameters
-from pantohil.builder.system import system_components
+from pantohil.builder.system import SECOND_PANTOGRAPH, with_second_pantograph
 from pantohil.models.case import Case, CaseError
 from pantohil.models.catenary.interface import catenary_model
 from pantohil.models.hil.loop import ConvergenceMonitor
@@ -38,7 +38,7 @@ from .run_options import RunOptions, check_options
 from .run_state import PreparedRun, RunState
 from .run_stepping import end_observers, step_until_done
 from .run_summary import EXIT_LINK_LOST, RunSummary
-from .run_topology import PAIR, VIRTUAL, Topology, delay_plan, run_topology
+from .run_topology import VIRTUAL, Topology, delay_plan, run_topology
 from .stopping import StopRequest, stop_on_signals
 
 __all__ = ["EXIT_LINK_LOST", "RECORDED_SPANS", "RunInterrupted", "RunObserver", "RunOptions", "RunSummary",
@@ -119,11 +119,15 @@ def prepare(prepared: PreparedRun) -> None:
         prepared.fmus = _resumed_fmus(prepared)
         prepared.connections = prepared.topology.connections
         prepared.parameters = {"catenary": {"delay_steps": plan["delay_steps"]}}
-    elif options.system is None and prepared.topology.name == PAIR.name:
-        built = build_case_fmus(prepared.case, prepared.out_dir / "fmus", plan["delay_steps"])
-        prepared.fmus, prepared.connections = system_components(built, two_pantographs=True)
+    elif options.system is None and prepared.topology.pantographs == 2:  # the second: an instance of the first's
+        names = tuple(n for n in prepared.topology.fmus if n != SECOND_PANTOGRAPH)
+        built = build_case_fmus(prepared.case, prepared.out_dir / "fmus", plan["delay_steps"],
+                                (*names, "pantograph") if "pantograph" not in names else names,
+                                options.hardware or ("127.0.0.1", 47800))
+        prepared.fmus = with_second_pantograph({n: built[n] for n in names}, built)
+        prepared.connections = prepared.topology.connections
         prepared.parameters = {"catenary": {"delay_steps": plan["delay_steps"]},
-                               "pantograph_2": second_pantograph_parameters(prepared.case)}
+                               SECOND_PANTOGRAPH: second_pantograph_parameters(prepared.case)}
     elif options.system is None:
         prepared.fmus = build_case_fmus(prepared.case, prepared.out_dir / "fmus", plan["delay_steps"],
                                         prepared.topology.fmus, options.hardware or ("127.0.0.1", 47800))

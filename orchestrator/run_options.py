@@ -62,12 +62,11 @@ def check_options(case: Case, options: RunOptions) -> None:
 
 
 def _check_pair(case: Case, options: RunOptions) -> None:
-    """Two pantographs run as a virtual HIL of FMUs from its start (models/hil/pair_loop.py's checks): not on a rig,
-    not in the in-process engine, not resumed."""
+    """Two pantographs run as FMUs from their start (models/hil/pair_loop.py's checks), the first virtual or on a
+    rig, the second virtual: not in the in-process engine, not resumed."""
     if case.sections.second_pantograph is None:
         return
-    for clash, given in (("--hardware", options.hardware is not None), ("--engine inprocess", options.engine != "fmu"),
-                         ("--resume", options.resume is not None)):
+    for clash, given in (("--engine inprocess", options.engine != "fmu"), ("--resume", options.resume is not None)):
         if given:
             case.refuse_second_pantograph(f"pantohil run {clash}")
     check_pair_case(case)

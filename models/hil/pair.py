@@ -19,11 +19,13 @@ same with or without Q.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+from types import SimpleNamespace
 
 import numpy as np
 
-from .loop import UPDATES, HilSettings, hold
+from .loop import UPDATES, HilSettings, commands_ahead, hold
 
 
 class PairedHil:
@@ -65,6 +67,14 @@ class PairedHil:
     def span(self) -> int:
         """Index b of the virtual span the next measured forces belong to."""
         return self.k // self.n
+
+    def ahead(self, count: int, point: int = 0) -> np.ndarray:
+        """The commands of the next `count` steps at `point` as the iterate stands (`commands_ahead`): the horizon
+        sent to the rig that carries that point's pantograph."""
+        older, newer = self._z_older[point], self.z[point]
+        view = SimpleNamespace(s=dataclasses.replace(self.s, delay_steps=self.delays[point]), n=self.n, k=self.k,
+                               _held=self._held[point], commands_at=lambda z, targets: z[targets], z=newer)
+        return commands_ahead(view, count, ((older, newer), (newer, newer), (newer, newer)))
 
     def step(self, forces) -> tuple[float, float]:
         """Take both points' forces measured at the current sample (NaN: not measured, the sample keeps its

@@ -12,6 +12,7 @@ import numpy as np
 from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, pair_forces, single_pantograph
 from pantohil.models.catenary.asm.pair import (
     PairSpec,
+    pair_static_compliance_m_N,
     read_receptance_csv,
     second_offset_m,
     write_receptance_csv,
@@ -95,7 +96,12 @@ class AsmModel:
         return asm_pair_iteration(cat, grid, z0, settings, delay_steps, pair, hp), z0
 
     def static_compliance_m_N(self, case) -> float:
-        """H11(0) of the string (Paper A eq. 14)."""
+        """H11(0) of the string (Paper A eq. 14); with a second pantograph, the first point's mean height per unit
+        mean force of both, H11(0) + H12(0) or H21(0) (models/catenary/asm/pair.py), so that the first's converged
+        mean force is the uplift force wherever it runs (virtual, on the rig, in the rig emulator)."""
+        second = case.sections.second_pantograph
+        if second is not None:
+            return pair_static_compliance_m_N(case.catenary, case.speed_m_s, second.spacing_m, second.position)[0]
         return float(np.real(receptance_direct(case.catenary, 0.0, case.speed_m_s)))
 
     def stability_operator(self, case, n_harmonics: int):

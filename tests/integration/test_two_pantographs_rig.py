@@ -1,0 +1,42 @@
+"""Two pantographs with one on the rig (issue 33, acceptance 4): the first pantograph through the adapter FMU and
+the rig emulator (model-paced, lockstep), the second virtual, an instance of the pantograph FMU at the catenary's
+second contact point; the first trailing the virtual one, then leading it. Each converges to the all-virtual pair
+(the in-process pair loop, equal to the virtual pair's FMUs to 1e-9 N: test_two_pantograph_fmus.py) within 0.5 %
+of the std for both pantographs: the converged result does not depend on the loop's latency (Paper D sec. 3.4),
+which differs between the rig's loop and the virtual one. The rig-paced link: tests/benchmarks/bench_pair_rig.py."""
+import json
+
+import numpy as np
+import pytest
+
+from conftest import PATIENT_LINK, pantohil
+from pantohil.models.case import load_case
+from pantohil.models.hil.pair_loop import run_pair_loop
+from test_hardware import Emulator, rel_rms
+
+pytestmark = pytest.mark.network
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("position", ["leading", "trailing"])  # the virtual one's place: the rig's is the other
+def test_a_pair_with_one_pantograph_on_the_rig_converges_to_the_all_virtual_pair(position, tmp_path):
+    overrides = ["second_pantograph.spacing_m=90", f'second_pantograph.position="{position}"',
+                 "hil.max_frequency_hz=10", PATIENT_LINK]
+    sets = [a for o in overrides for a in ("--set", o)]
+    emulator = Emulator(tmp_path, *sets)
+    try:
+        out = tmp_path / "run"
+        done = pantohil("run", "--hardware", emulator.address, *sets, "--out", str(out), "--quiet", timeout=1800)
+    finally:
+        stats = emulator.stop()
+    assert done.returncode == 0, done.stdout + done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "converged" and summary["topology"] == "hardware_pair"
+    assert summary["second_pantograph"]["position"] == position
+    assert stats["commands"] == summary["link"]["sent"] > 0  # every step went through the rig
+    table = np.genfromtxt(out / "steady_span.csv", delimiter=",", names=True)
+    virtual = run_pair_loop(load_case(None, overrides))
+    assert virtual.status == "converged"
+    for got, want in ((table["f_N"], virtual.force_N[0]), (table["f2_N"], virtual.force_N[1])):
+        assert rel_rms(got, want) < 5e-3
+        assert got.mean() == pytest.approx(want.mean(), rel=1e-3)  # the rig's pantograph set as the pair's first
