@@ -56,7 +56,8 @@ from .run_folder import SUMMARY, read_summary
 KINDS = ("run", "direct")
 DIRECT_KEYS = ("direct.second_pantograph_m",)
 STATS = ("status", "converged", "diverged", "spans", "mean_N", "std_N", "std_20hz_N", "max_N", "min_N",
-         "trailing_std_N", "trailing_std_20hz_N", "wall_s", "finished_utc", "message")
+         "trailing_std_N", "trailing_std_20hz_N", "second_std_N", "second_std_20hz_N", "wall_s", "finished_utc",
+         "message")  # second_*: kind "run" of a case with a [second_pantograph]
 DONE = ("converged", "completed", "span_limit", "diverged", "ok")
 RESULTS_EVERY_S = 2.0  # results.csv/.parquet rewritten at most this often while points finish, and at the end
 MAX_POINTS = 10_000  # points of a sweep, all grid keys together
@@ -232,6 +233,8 @@ def sweep_point(task: dict) -> dict:
                "mean_N": cf.get("mean_N"), "std_N": cf.get("std_N"),
                "std_20hz_N": cf.get("filtered_20hz", {}).get("std_N"), "max_N": cf.get("max_N"),
                "min_N": cf.get("min_N"), "message": s["message"]}
+        second = s.get("second_pantograph", {}).get("contact_force", {})
+        out.update(second_std_N=second.get("std_N"), second_std_20hz_N=second.get("filtered_20hz", {}).get("std_N"))
     out["wall_s"] = time.perf_counter() - t0
     out["finished_utc"] = datetime.now(UTC).isoformat(timespec="seconds")
     return out
@@ -319,6 +322,9 @@ def _sweep_as_run(sweep_path: Path, engine: str | None, point_plots: bool | None
         definition["engine"] = _engine(Path(sweep_path), engine)
     if point_plots is not None:
         definition["point_plots"] = point_plots
+    pair = any(o.startswith("second_pantograph.") for p in sweep["points"] for o in p["overrides"])
+    if definition["kind"] == "run" and definition["engine"] == "inprocess" and pair:
+        _fail(Path(sweep_path), 'two pantographs run as FMUs: set engine = "fmu" (or --engine fmu)', "sweep.engine")
     return definition, sweep["points"]
 
 
@@ -414,6 +420,9 @@ def plot_sweep(out: Path, rows: list[dict], definition: dict) -> list[str]:
         except (TypeError, ValueError):
             return math.nan
 
+    trailing = definition["kind"] == "direct" and "direct.second_pantograph_m" in definition["grid"]
+    second = definition["kind"] == "run" and "second_pantograph.spacing_m" in definition["grid"]
+    column = "trailing_std_N" if trailing else "second_std_20hz_N" if second else "std_20hz_N"
     series = {}
     for r in rows:
         label = ", ".join(f"{k} = {r.get(k)}" for k in others)
@@ -422,14 +431,12 @@ def plot_sweep(out: Path, rows: list[dict], definition: dict) -> list[str]:
     for label, rs in sorted(series.items(), key=lambda kv: [num(kv[1][0].get(k)) for k in others]):
         rs = sorted(rs, key=lambda r: num(r.get(x)))
         xs = np.array([num(r.get(x)) for r in rs])
-        ys = np.array([num(r.get("trailing_std_N") if definition["kind"] == "direct" and
-                           "direct.second_pantograph_m" in definition["grid"] else r.get("std_20hz_N"))
-                       for r in rs])
+        ys = np.array([num(r.get(column)) for r in rs])
         ok = np.array([r.get("status") in DONE for r in rs])
         curves.append((label, xs, ys, ok))
-    trailing = definition["kind"] == "direct" and "direct.second_pantograph_m" in definition["grid"]
-    ylabel = "std of the trailing pantograph's contact force [N]" if trailing else \
-        "std of the contact force, 20 Hz [N]"
+    ylabel = ("std of the trailing pantograph's contact force [N]" if trailing else
+              "std of the second pantograph's contact force, 20 Hz [N]" if second else
+              "std of the contact force, 20 Hz [N]")
     name = "std_vs_" + x.replace(".", "_") + ".png"
     plot_sweep_std(out / name, curves, x, ylabel, definition["name"])
     return [name]

@@ -63,3 +63,36 @@ def test_direct_takes_the_spacing_of_the_case(tmp_path):
     done = pantohil("direct", *PAIR)
     assert done.returncode == 0, done.stderr
     assert "two pantographs 200 m apart: leading std 18.915 N, trailing std 20.051 N" in done.stdout
+
+
+SWEEP = """[sweep]
+name = "pair_spacing"
+description = "the second pantograph's std against the spacing"
+case = "{case}"
+kind = "run"
+{engine}
+[set]
+"hil.max_frequency_hz" = 10
+"run.max_spans" = 3
+
+[grid]
+"second_pantograph.spacing_m" = [90.0, 200.0]
+"""
+
+
+@pytest.mark.slow
+def test_a_sweep_of_the_spacing_reports_the_second_pantograph(tmp_path):
+    from conftest import ROOT
+
+    case = ROOT / "models/data/cases/asm_250.toml"
+    (tmp_path / "fmu.toml").write_text(SWEEP.format(case=case, engine='engine = "fmu"'))
+    done = pantohil("sweep", str(tmp_path / "fmu.toml"), "--out", str(tmp_path / "out"), "--quiet")
+    assert done.returncode == 0, done.stdout + done.stderr
+    rows = np.genfromtxt(tmp_path / "out/results.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert len(rows) == 2 and all(rows["second_std_20hz_N"] > 1.0)
+    assert (tmp_path / "out/std_vs_second_pantograph_spacing_m.png").stat().st_size > 0
+    # the in-process engine runs one pantograph: the sweep says so before it starts
+    (tmp_path / "inprocess.toml").write_text(SWEEP.format(case=case, engine=""))
+    refused = pantohil("sweep", str(tmp_path / "inprocess.toml"), "--out", str(tmp_path / "no"))
+    assert refused.returncode == 2 and 'set engine = "fmu"' in refused.stderr
+    assert not (tmp_path / "no").exists()
