@@ -88,11 +88,8 @@ def pair_static_compliance_m_N(cat: AsmParameters, speed_m_s: float, spacing_m: 
                                position: str) -> tuple[float, float]:
     """Each point's mean height per unit mean force of both (equal) forces, H_ii(0) + H_ij(0) [m/N]: where each
     pantograph is set so that its converged mean force is the uplift force."""
-    direct = float(np.real(receptance_direct(cat, 0.0, speed_m_s)))
-    ahead = float(np.real(receptance_ahead(cat, 0.0, speed_m_s, spacing_m)))
-    behind = float(np.real(receptance_behind(cat, 0.0, speed_m_s, spacing_m)))
-    second_behind = second_offset_m(spacing_m, position) < 0
-    return (direct + ahead, direct + behind) if second_behind else (direct + behind, direct + ahead)
+    static = pair_spectra(cat, speed_m_s, 1, 1.0, 1, spacing_m, position)[0].real  # the pair's receptance at w = 0
+    return float(static[0].sum()), float(static[1].sum())
 
 
 def write_receptance_csv(folder: Path, receptance_m_N: np.ndarray) -> Path:
