@@ -4,7 +4,8 @@ panels for a live run (`pantohil run --live`) and for its run.mcap, since both c
     python -m pantohil.orchestrator.live_layout docs/foxglove   # writes both layout files
 
 pantohil-layout.json is for virtual runs (/rig, /pantograph); pantohil-rig-layout.json for runs on a
-rig (`--hardware`: /adapter, with the link's counters and state).
+rig (`--hardware`: /adapter, with the link's counters and state); pantohil-pair-layout.json for virtual runs
+of two pantographs (also /pantograph_2 and the catenary's second contact point).
 """
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ from pathlib import Path
 
 import foxglove.layouts as fl
 
-LAYOUT_FILES = {"virtual": "pantohil-layout.json", "hardware": "pantohil-rig-layout.json"}
+LAYOUT_FILES = {"virtual": "pantohil-layout.json", "hardware": "pantohil-rig-layout.json",
+                "pair": "pantohil-pair-layout.json"}
 LINK_COUNTERS = ("lost", "late", "reordered", "duplicated", "malformed", "limited")
 
 
@@ -49,6 +51,16 @@ def build_layout(topology: str) -> fl.Layout:
                                                ("/catenary.height_command", "commanded")])
         bottom = _row(force, height, fl.RawMessagesPanel(title="Last span",
                                                          config=fl.RawMessagesConfig(topic_path="/convergence")))
+    elif topology == "pair":
+        force = _plot("Contact force per step [N]", [("/catenary.force_at_sample", "first, in use"),
+                                                      ("/pantograph.contact_force", "first pantograph"),
+                                                      ("/catenary.force_at_sample_2", "second, in use"),
+                                                      ("/pantograph_2.contact_force", "second pantograph")])
+        height = _plot("Commanded heights [m]", [("/catenary.height_command", "first"),
+                                                 ("/catenary.height_command_2", "second"),
+                                                 ("/rig.actuator_height", "first's actuator")])
+        bottom = _row(force, height, fl.RawMessagesPanel(title="Last span",
+                                                         config=fl.RawMessagesConfig(topic_path="/convergence")))
     elif topology == "hardware":
         force = _plot("Contact force per step [N]", [("/catenary.force_at_sample", "force in use"),
                                                       ("/adapter.measured_force", "measured on the rig")])
@@ -65,7 +77,7 @@ def build_layout(topology: str) -> fl.Layout:
 
 
 def layout_json(topology: str) -> str:
-    """The Foxglove layout of a topology ("virtual" or "rig") as JSON text."""
+    """The Foxglove layout of a topology ("virtual", "hardware" or "pair") as JSON text."""
     return json.dumps(json.loads(build_layout(topology).to_json()), indent=2) + "\n"
 
 

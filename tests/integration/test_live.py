@@ -92,7 +92,7 @@ def test_live_client_receives_the_logged_values(tmp_path):
     assert len(last["force_N"]) == len(last["previous_force_N"]) == 936
 
 
-@pytest.mark.parametrize("topology", ["virtual", "hardware"])
+@pytest.mark.parametrize("topology", ["virtual", "hardware", "pair"])
 def test_shipped_layouts_are_the_generated_ones(topology):
     from pantohil.orchestrator.live_layout import LAYOUT_FILES, layout_json
 

@@ -11,6 +11,7 @@ from mcap.reader import make_reader
 from conftest import pantohil
 from pantohil.models.case import load_case
 from pair_references import closed_form_pair
+from pantohil.orchestrator.live_layout import layout_json, layout_topics
 
 PAIR = ("--set", "second_pantograph.spacing_m=200")
 # below the contact frequency (14.8 Hz) the pair's iteration is stable (tests/unit/test_two_pantographs.py)
@@ -47,6 +48,8 @@ def test_pantohil_run_of_a_pair_converges_to_the_pairs_closed_form(pair_run):
     with open(out / "run.mcap", "rb") as fh:
         topics = {c.topic for c in make_reader(fh).get_summary().channels.values()}
     assert {"/pantograph", "/pantograph_2"} <= topics
+    layout = json.loads(layout_json("pair"))  # the shipped layout of a pair names only what its log holds
+    assert layout_topics(layout) <= topics and "/pantograph_2" in layout_topics(layout)
 
 
 @pytest.mark.parametrize("command", [("stability",), ("run", "--engine", "inprocess")])
