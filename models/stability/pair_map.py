@@ -113,9 +113,13 @@ def pair_loop_latency_steps(case: Case) -> tuple[int, int]:
     return (LOOP_CONNECTIONS + case.hold_steps + rig.delay_steps, VIRTUAL_CONNECTIONS + case.hold_steps)
 
 
-def pair_spectral_radius(case: Case) -> float:
+def pair_spectral_radius(case: Case, delay_steps: tuple[int, int] | None = None,
+                         latency_steps: tuple[int, int] | None = None) -> float:
     """The rate per span of the case's pair iteration (its operators, coupling compensation, update, relaxation,
-    f_max and delay advances): below 1 it converges (Paper D eq. 13 for two points)."""
-    hil = pair_iteration(case, pair_delay_steps(case))
+    f_max), below 1 where it converges (Paper D eq. 13 for two points): with the virtual pair's delay advances
+    and loop latencies, or those given (a pair whose first pantograph is on a rig: the run's D and the link's
+    latency)."""
+    hil = pair_iteration(case, pair_delay_steps(case) if delay_steps is None else delay_steps)
     pan = linear_pantograph(case.pantograph, case.dt_s)
-    return pair_span_map(hil, pan, pair_loop_latency_steps(case)).spectral_radius
+    latency = pair_loop_latency_steps(case) if latency_steps is None else latency_steps
+    return pair_span_map(hil, pan, latency).spectral_radius
