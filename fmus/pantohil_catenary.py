@@ -255,11 +255,13 @@ class PantohilCatenary(PantohilSlave):
         """Output: the virtual span b the last force belonged to."""
         return 0 if self._hil is None else max(self._hil.k - 1, 0) // self._hil.n
 
-    def _point(self, values: np.ndarray, point: int) -> float:
-        """A per-sample value of contact point `point` (0 the first) at sample_index; 0 before initialisation
-        or for a second point the catenary does not have."""
+    def _point(self, source: str, point: int) -> float:
+        """A per-sample value of contact point `point` (0 the first) at sample_index: the iteration's `source`
+        ("z", "force_estimate"), or "profile" (z0); 0 before initialisation or for a second point the catenary
+        does not have."""
         if self._hil is None:
             return 0.0
+        values = self._z0 if source == "profile" else getattr(self._hil, source)
         if self.second_pantograph:
             return float(values[point, self._label])
         return 0.0 if point else float(values[self._label])
@@ -267,32 +269,32 @@ class PantohilCatenary(PantohilSlave):
     @property
     def height_at_sample(self) -> float:
         """Output: the converging wire height at sample_index [m]."""
-        return self._point(self._hil.z if self._hil is not None else None, 0)
+        return self._point("z", 0)
 
     @property
     def profile_at_sample(self) -> float:
         """Output: the static height z0 at sample_index [m]."""
-        return self._point(self._z0 if self._hil is not None else None, 0)
+        return self._point("profile", 0)
 
     @property
     def force_at_sample(self) -> float:
         """Output: the force in use at sample_index (the measured one, or the previous span's) [N]."""
-        return self._point(self._hil.force_estimate if self._hil is not None else None, 0)
+        return self._point("force_estimate", 0)
 
     @property
     def height_at_sample_2(self) -> float:
         """Output: the converging wire height at the second point at sample_index [m]."""
-        return self._point(self._hil.z if self._hil is not None else None, 1)
+        return self._point("z", 1)
 
     @property
     def profile_at_sample_2(self) -> float:
         """Output: the static height z0 at the second point at sample_index [m]."""
-        return self._point(self._z0 if self._hil is not None else None, 1)
+        return self._point("profile", 1)
 
     @property
     def force_at_sample_2(self) -> float:
         """Output: the force in use at the second point at sample_index [N]."""
-        return self._point(self._hil.force_estimate if self._hil is not None else None, 1)
+        return self._point("force_estimate", 1)
 
     @property
     def slack_droppers(self) -> int:

@@ -29,11 +29,6 @@ from .maps import SpanMap, _layout
 POINTS = PairedHil.POINTS
 
 
-def dense(operator, n: int) -> np.ndarray:
-    """The N x N matrix of an operator that exposes `column(m)`."""
-    return np.column_stack([operator.column(m) for m in range(n)])
-
-
 def pair_span_map(hil: PairedHil, pan: LinearPantograph, latency_steps: tuple[int, int]) -> SpanMap:
     """A of X^(b+1) = A X^b for the pair iteration `hil` (its operators, compensation, settings and delay
     advances) with the pantograph `pan` at both points and `latency_steps` per point between a force sample
@@ -46,9 +41,9 @@ def pair_span_map(hil: PairedHil, pan: LinearPantograph, latency_steps: tuple[in
     blocks, dim = _layout({"rf": POINTS * n, "z_older": POINTS * n if span else 0, "pantograph": POINTS * pan.size,
                            "force": POINTS, "in_flight_1": lags[0], "in_flight_2": lags[1]})
     X = np.eye(dim)
-    ops = [[dense(hil.ops[i][j], n) for j in range(POINTS)] for i in range(POINTS)]
-    Q = None if hil.q is None else [[dense(hil.q[i][j], n) for j in range(POINTS)] for i in range(POINTS)]
-    IQ = None if hil.iq is None else [[dense(hil.iq[i][j], n) for j in range(POINTS)] for i in range(POINTS)]
+    ops = [[hil.ops[i][j].dense() for j in range(POINTS)] for i in range(POINTS)]
+    Q = None if hil.q is None else [[hil.q[i][j].dense() for j in range(POINTS)] for i in range(POINTS)]
+    IQ = None if hil.iq is None else [[hil.iq[i][j].dense() for j in range(POINTS)] for i in range(POINTS)]
     rf = X[blocks["rf"]].reshape(POINTS, n, dim).copy()
     z = _heights(ops, rf)
     z_older = X[blocks["z_older"]].reshape(POINTS, n, dim).copy() if span else None
