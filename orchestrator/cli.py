@@ -247,7 +247,8 @@ def _add_stability_command(sub) -> None:
         "and delay, with the best relaxation (Paper D sec. 4, Figs. 5-7)",
     )
     _add_case_args(stab, optional=True)
-    stab.add_argument("--update", choices=("step", "span"), help="updating strategy (default: the case's)")
+    stab.add_argument("--update", choices=("step", "span"), help="updating strategy (default: the case's; "
+                      "a two-pantograph case: both)")
     stab.add_argument("--fmax", metavar="A:B:N", help="highest frequency of the catenary response [Hz] "
                       "(A:B:N, A:B:N:log, A,B,C or A; default: the case's)")
     stab.add_argument("--contact-stiffness", metavar="A:B:N", help="penalty contact stiffness k_c [N/m] "
@@ -731,6 +732,9 @@ def _cmd_stability(args) -> int:
         return 1
     print(f"{s['points']} points ({s['update']}), {s['stable_points']} stable, lowest spectral radius "
           f"{s['min_spectral_radius']:.4f}; {s['timing']['map_s']:.1f} s on {s['workers']} workers")
+    if "verdict" in s:
+        print(f"two pantographs, L = {s['second_pantograph']['spacing_m']:g} m {s['second_pantograph']['position']}: "
+              f"{s['verdict']}")
     print(f"written to {args.out}")
     return 0
 

@@ -163,12 +163,16 @@ def run_stability(case_path: Path | None, overrides: list[str], out: Path, updat
     given takes the case's value (the delay: the case's latency and advance). The folder `out` is checked
     first and appears complete or not at all (`overwrite` replaces a used one)."""
     case = load_case(case_path, overrides)
-    case.refuse_second_pantograph("pantohil stability")
-    update = update or case.hil_update
-    if update not in ("step", "span"):
+    if update is not None and update not in ("step", "span"):
         raise CaseError(f"update: must be step or span (got {update!r})")
     if relaxation is not None and not 0 < relaxation < 2:
         raise CaseError(f"relaxation: must lie in (0, 2) (got {relaxation:g})")
+    if case.sections.second_pantograph is not None:
+        from .pair_stability import refuse_pair_axes, run_pair_stability
+
+        refuse_pair_axes(f_max_hz, contact_stiffness_N_m, delay_steps)
+        return run_pair_stability(case, case_path, overrides, out, update, relaxation, overwrite, write_csv)
+    update = update or case.hil_update
     f_values, k_values = _frequency_and_stiffness_axes(case, f_max_hz, contact_stiffness_N_m)
     pairs = _delay_latency_pairs(case, delay_steps)
     points = len(pairs) * len(f_values) * len(k_values)

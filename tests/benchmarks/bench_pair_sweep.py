@@ -24,7 +24,7 @@ def local_minima(x: np.ndarray, y: np.ndarray) -> list[float]:
     return [float(x[i]) for i in range(1, len(y) - 1) if y[i] < y[i - 1] and y[i] < y[i + 1]]
 
 
-def sweep(speed_kmh: float, spacings_m: np.ndarray) -> dict:
+def sweep(speed_kmh: float, spacings_m: np.ndarray, overrides: list[str]) -> dict:
     """The HIL's and the closed form's std of both pantographs at each spacing, and eq. (45)'s spacings."""
     from pantohil.models.case import load_case
     from pantohil.models.catenary.asm.closed_form import one_sided_harmonics, optimal_spacings, two_pantographs
@@ -35,7 +35,7 @@ def sweep(speed_kmh: float, spacings_m: np.ndarray) -> dict:
     bar = progress(len(spacings_m), f"{speed_kmh:g} km/h", "spacing")
     for L in spacings_m:
         case = load_case(None, ["hil.max_frequency_hz=10", f"run.speed_kmh={speed_kmh}", "run.max_spans=600",
-                                f"second_pantograph.spacing_m={L}"])
+                                f"second_pantograph.spacing_m={L}", *overrides])
         t0 = time.perf_counter()
         result = run_pair_loop(case)
         lead, trail = two_pantographs(case.catenary, case.pantograph, case.speed_m_s, case.span_m,
@@ -107,10 +107,12 @@ def main() -> None:
     ap.add_argument("--from", dest="first", type=float, default=20.0, help="first spacing [m]")
     ap.add_argument("--to", dest="last", type=float, default=250.0, help="last spacing [m]")
     ap.add_argument("--step", type=float, default=5.0, help="spacing step [m]")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="a case override for every point (repeatable), e.g. hil.update=span")
     ap.add_argument("--out", type=Path, default=None, help="folder for pair_sweep.png")
     args = ap.parse_args()
     spacings = np.arange(args.first, args.last + args.step / 2, args.step)
-    results = {speed: sweep(speed, spacings) for speed in args.speeds}
+    results = {speed: sweep(speed, spacings, args.overrides) for speed in args.speeds}
     for speed, result in results.items():
         report(speed, result, args.step)
     if args.out is not None:

@@ -52,14 +52,32 @@ def test_pantohil_run_of_a_pair_converges_to_the_pairs_closed_form(pair_run):
     assert layout_topics(layout) <= topics and "/pantograph_2" in layout_topics(layout)
 
 
-@pytest.mark.parametrize("command", [("stability",), ("run", "--engine", "inprocess")])
+@pytest.mark.parametrize("command", [("stability", "--fmax", "5:10:2"), ("run", "--engine", "inprocess")])
 def test_a_command_for_one_pantograph_refuses_a_case_with_two(command, tmp_path):
     out = tmp_path / "out"
     done = pantohil(*command, *PAIR, "--out", str(out))
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
-    assert len(lines) == 1 and "second_pantograph: " in lines[0] and "runs one pantograph" in lines[0]
+    assert len(lines) == 1 and ("runs one pantograph" in lines[0] or "--fmax: a two-pantograph case" in lines[0])
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_stability_of_a_pair_names_the_update_that_converges(tmp_path):
+    """At L = 70 m (250 km/h, 10 Hz) the step-by-step pair diverges even with the coupling compensation and the
+    span-by-span one converges (tests/unit/test_pair_stability.py runs both); `pantohil stability` of the pair
+    maps both strategies and says so before a run."""
+    out = tmp_path / "stab"
+    done = pantohil("stability", "--set", "second_pantograph.spacing_m=70", "--set", "hil.max_frequency_hz=10",
+                    "--relaxation", "0.3", "--out", str(out), "--quiet")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["pair"]["step"]["spectral_radius"] > 1.2
+    assert summary["pair"]["span"]["spectral_radius"] == pytest.approx(0.9535, abs=2e-3)
+    assert summary["stable_points"] == 1 and "converges with span-by-span updating" in summary["verdict"]
+    assert "two pantographs, L = 70 m trailing: converges with span-by-span" in done.stdout
+    table = np.genfromtxt(out / "stability.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert list(table["update"]) == ["step", "span"]
 
 
 def test_direct_takes_the_spacing_of_the_case(tmp_path):
