@@ -105,3 +105,47 @@ def test_paper_a_asm_fit(paper_a):
         ]
     )
     assert len(dev) > 100 and np.sqrt(np.mean(dev**2)) < 0.025 and np.max(np.abs(dev)) < 0.07
+
+
+def _with_heights(name: str, heights, **catenary):
+    import tomllib
+
+    from pantohil.models.catenary.fe.definition import build_definition
+
+    raw = tomllib.loads((CATENARIES / f"{name}.toml").read_text(encoding="utf-8"))
+    raw["catenary"].update({"contact_wire_heights_m": list(heights), **catenary})
+    return build_definition(raw)
+
+
+def test_heights_at_the_droppers_equal_to_the_pre_sag_give_the_pre_sag_catenary():
+    """The benchmark-like catenary's 55 mm pre-sag written as its heights at the droppers form-finds to the same
+    dropper lengths and tensions (form-finding holds the contact wire at the droppers only)."""
+    presag = load_definition(CATENARIES / "benchmark_simple.toml")
+    heights = presag.design_height(np.array(presag.dropper_positions_m))
+    given = _with_heights("benchmark_simple", heights, presag_m=0.0)
+    a, b = form_find(presag, 3), form_find(given, 3)
+    assert np.abs(b.dropper_lengths_m - a.dropper_lengths_m).max() < 1e-12
+    assert np.abs(b.dropper_tensions_N - a.dropper_tensions_N).max() < 1e-8
+
+
+def test_form_finding_holds_the_contact_wire_at_the_heights_given():
+    heights = [0.0, -0.02, -0.035, -0.04, -0.035, -0.02, 0.0]
+    cat = _with_heights("paper_a_stitched", heights)
+    ff = form_find(cat, 3)
+    per_span = len(heights)
+    at_droppers = np.array([ff.heights[d[1]] for d in ff.section.droppers])
+    assert np.abs(at_droppers - np.tile(heights, len(at_droppers) // per_span)).max() < 1e-6
+    assert np.all(ff.dropper_tensions_N > 0)
+
+
+@pytest.mark.parametrize(("heights", "extra", "message"), [
+    ([0.0] * 6, {}, "catenary.contact_wire_heights_m: 6 heights for 7 droppers"),
+    ([0.0] * 7, {"presag_m": 0.05}, "catenary.contact_wire_heights_m: give either"),
+    ([0.0, 0.0, 0.0, 1.5, 0.0, 0.0, 0.0], {}, "catenary.contact_wire_heights_m: dropper 4 would need a length"),
+])
+def test_heights_that_cannot_be_built_are_named(heights, extra, message):
+    from pantohil.models.catenary.fe.definition import CatenaryError
+
+    with pytest.raises(CatenaryError, match=message) as err:
+        form_find(_with_heights("paper_a_stitched", heights, **extra), 3)
+    assert err.value.key == "catenary.contact_wire_heights_m"

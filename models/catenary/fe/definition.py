@@ -60,11 +60,15 @@ class CatenaryDefinition:
     mesh_size_m: float
     values: dict
     presag_span: str = "supports"  # the pre-sag parabola runs between the "supports" or the "end_droppers"
+    dropper_heights_m: tuple | None = None  # design heights at the droppers, in place of the pre-sag parabola
 
     def design_height(self, x: np.ndarray) -> np.ndarray:
         """Design contact-wire height (negative down): the pre-sag parabola, 0 at the supports, or 0 at the
-        first and last droppers and level with the supports outside them."""
+        first and last droppers and level with the supports outside them; or, given, the heights at the
+        droppers, 0 at the supports and straight between (form-finding holds the droppers' points only)."""
         x = np.asarray(x, dtype=float)
+        if self.dropper_heights_m is not None:
+            return np.interp(x, (0.0, *self.dropper_positions_m, self.span_m), (0.0, *self.dropper_heights_m, 0.0))
         a, b = (0.0, self.span_m) if self.presag_span == "supports" else (self.dropper_positions_m[0],
                                                                            self.dropper_positions_m[-1])
         return -4.0 * self.presag_m * np.clip(x - a, 0, None) * np.clip(b - x, 0, None) / (b - a) ** 2
@@ -104,6 +108,9 @@ class SpanSection:
     dropper_positions_m: tuple = param(None, "m", "dropper positions from the span's first support, increasing "
                                                   "(or dropper_spacing_m)", 0.0, 1000.0, low_open=True,
                                        max_items=MAX_DROPPERS)
+    contact_wire_heights_m: tuple = param(None, "m", "design contact-wire height at each dropper, in dropper order, "
+                                                     "relative to the supports (negative: below); in place of "
+                                                     "presag_m", -10.0, 10.0, max_items=MAX_DROPPERS)
     mesh_size_m: float = param(0.25, "m", "element length, at most the shortest dropper interval", MIN_MESH_SIZE_M,
                                10.0)
     alpha_1_s: float = param(0.0125, "1/s", "Rayleigh alpha", 0.0, 100.0)
@@ -230,6 +237,20 @@ def _dropper_positions(c: dict, span: float) -> tuple[float, ...]:
     return positions
 
 
+def _dropper_heights(c: dict, positions: tuple[float, ...]) -> tuple[float, ...] | None:
+    """The design heights at the droppers, one per dropper, or None (the pre-sag parabola)."""
+    heights = c["contact_wire_heights_m"]
+    if heights is None:
+        return None
+    if len(heights) != len(positions):
+        raise CatenaryError(f"catenary.contact_wire_heights_m: {len(heights)} heights for {len(positions)} droppers",
+                            key="catenary.contact_wire_heights_m")
+    if c["presag_m"] != 0:
+        raise CatenaryError("catenary.contact_wire_heights_m: give either the heights at the droppers or presag_m",
+                            key="catenary.contact_wire_heights_m")
+    return tuple(float(h) for h in heights)
+
+
 def _stitch(v: dict, span: float) -> tuple[Wire | None, float]:
     """The stitch wire and its length, or (None, 0) without one."""
     s = v["stitch_wire"]
@@ -276,7 +297,8 @@ def build_definition(raw: dict, source: Path | None = None) -> CatenaryDefinitio
         clamp_mass_messenger_kg=d["clamp_mass_messenger_kg"], clamp_mass_contact_kg=d["clamp_mass_contact_kg"],
         steady_arm_mass_kg=sa["mass_kg"], steady_arm_stiffness_N_m=sa["stiffness_N_m"],
         messenger_support_stiffness_N_m=_support_stiffness(v["messenger_support"]),
-        alpha_1_s=c["alpha_1_s"], beta_s=c["beta_s"], mesh_size_m=c["mesh_size_m"], values=raw)
+        alpha_1_s=c["alpha_1_s"], beta_s=c["beta_s"], mesh_size_m=c["mesh_size_m"], values=raw,
+        dropper_heights_m=_dropper_heights(c, positions))
 
 
 def load_definition(path: Path) -> CatenaryDefinition:

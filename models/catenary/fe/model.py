@@ -246,12 +246,16 @@ def _check_droppers(cat: CatenaryDefinition, lengths: np.ndarray, tensions: np.n
     """Every dropper of positive length and in tension, else CatenaryError naming the key to change."""
     per_span = len(cat.dropper_positions_m)
     for i in np.flatnonzero(lengths <= 0)[:1]:
-        raise CatenaryError(f"catenary.presag_m: dropper {i % per_span + 1} would need a length of {lengths[i]:.3f} m "
-                            f"(the contact wire reaches the messenger: less pre-sag or more encumbrance)")
+        key = "catenary.contact_wire_heights_m" if cat.dropper_heights_m is not None else "catenary.presag_m"
+        raise CatenaryError(f"{key}: dropper {i % per_span + 1} would need a length of {lengths[i]:.3f} m "
+                            f"(the contact wire reaches the messenger: a lower contact wire or more encumbrance)",
+                            key=key)
     for i in np.flatnonzero(tensions <= 0)[:1]:
         key = "catenary.presag_m" if cat.presag_m != 0 else "catenary.dropper_positions_m"
+        if cat.dropper_heights_m is not None:
+            key = "catenary.contact_wire_heights_m"
         raise CatenaryError(f"{key}: dropper {i % per_span + 1} would be in compression ({tensions[i]:.1f} N) to hold "
-                            f"the design heights")
+                            f"the design heights", key=key)
 
 
 def _linearised_stiffness(cat: CatenaryDefinition, sec, lengths: np.ndarray):
