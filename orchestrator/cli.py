@@ -775,6 +775,69 @@ def _cmd_example(args) -> int:
     return 0
 
 
+def _add_optimise_command(sub) -> None:
+    """`pantohil optimise` and its options."""
+    opt = sub.add_parser("optimise", help="catenary design of least contact-force std (0-20 Hz) over the contact-wire "
+                                          "heights at the droppers or the dropper positions (Paper D sec. 5.3)")
+    opt.add_argument("catenary_file", type=Path, help="catenary file (TOML) of the nominal design, symmetric span")
+    opt.add_argument("--case", type=Path, required=True,
+                     help="case whose pantograph, step and PFEM settings evaluate each design (e.g. pfem_stitched_250)")
+    opt.add_argument("--set", dest="overrides", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                     help="override a case key (repeatable)")
+    opt.add_argument("--vary", required=True, metavar="heights|spacing",
+                     help="heights: the contact-wire heights at the droppers; spacing: the dropper positions")
+    opt.add_argument("--speeds", type=number(1.0, 600.0, unit="km/h"), nargs="+", default=[], metavar="KMH",
+                     help="speeds of the objective [km/h] (default: the case's)")
+    opt.add_argument("--weights", type=number(0.0, 1e6), nargs="+", default=[], help="a weight per speed")
+    opt.add_argument("--max-height-deviation", type=number(1e-4, 1.0, unit="m"), default=0.1,
+                     help="largest change of a height at a dropper [m] (default 0.1)")
+    opt.add_argument("--min-dropper-length", type=number(0.0, 10.0, unit="m"), default=0.3,
+                     help="shortest dropper [m] (default 0.3)")
+    opt.add_argument("--min-dropper-spacing", type=number(0.01, 100.0, unit="m"), default=3.0,
+                     help="shortest distance between droppers [m] (default 3)")
+    opt.add_argument("--max-designs", type=number(2, 100000, integer=True), default=200,
+                     help="most designs evaluated (default 200)")
+    opt.add_argument("--out", type=Path, required=True, help="folder (the same command continues a folder it started)")
+    opt.add_argument("--overwrite", action="store_true", help="start again in a used folder")
+    opt.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: a LocalCluster)")
+    opt.add_argument("--workers", type=number(1, MAX_WORKERS, integer=True), help="LocalCluster workers (default: 2)")
+    opt.add_argument("--no-confirm", action="store_true",
+                     help="skip the virtual HIL runs with dropper slackening of the nominal and optimised designs")
+    opt.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _cmd_optimise(args) -> int:
+    from pantohil.models.catenary.design import DesignLimits
+    from pantohil.orchestrator.optimise import OptimiseRequest
+    from pantohil.orchestrator.optimise_run import run_optimise
+
+    limits = DesignLimits(args.max_height_deviation, args.min_dropper_length, args.min_dropper_spacing)
+    request = OptimiseRequest(catalog.resolve(args.catenary_file, "catenary"), catalog.resolve(args.case, "case"),
+                              tuple(args.overrides), args.vary, tuple(args.speeds), tuple(args.weights), limits,
+                              args.max_designs)
+    try:
+        s = run_optimise(request, args.out, args.scheduler, args.workers, args.overwrite, not args.quiet,
+                         not args.no_confirm)
+    except KeyboardInterrupt as exc:
+        print(f"pantohil: optimise {_interrupted_by(exc)}: the designs evaluated are in {args.out}; run the same "
+              "command again to continue", file=sys.stderr)
+        return _interrupt_code(exc)
+    for sp in s["speeds"]:
+        n, o = sp["nominal"], sp["optimised"]
+        print(f"{sp['speed_kmh']:g} km/h: std {n['std_N']:.2f} -> {o['std_N']:.2f} N "
+              f"({-sp['std_reduction_percent']:+.2f} %), max {n['max_N']:.1f} -> {o['max_N']:.1f} N, "
+              f"min {n['min_N']:.1f} -> {o['min_N']:.1f} N")
+    c = s["nonlinear_confirmation"]
+    if c:
+        print(f"virtual HIL with dropper slackening: std {c['nominal']['std_N']:.2f} -> "
+              f"{c['optimised']['std_N']:.2f} N ({-c['std_reduction_percent']:+.2f} %; {c['nominal']['status']}, "
+              f"{c['optimised']['status']})")
+    print(f"{s['designs']['in_journal']} designs ({s['designs']['evaluated_now']} now) in "
+          f"{s['timing']['wall_s']:.0f} s on {s['workers']} workers; {s['stopped']}")
+    print(f"written to {args.out} (optimised_catenary.toml, optimised_case.toml, optimise.png)")
+    return 0
+
+
 COMMANDS = (  # each command's parser and its handler, in the order of `pantohil --help`
     (_add_run_command, _cmd_run),
     (_add_watch_command, _cmd_watch),
@@ -787,6 +850,7 @@ COMMANDS = (  # each command's parser and its handler, in the order of `pantohil
     (_add_compare_command, _cmd_compare),
     (_add_stability_command, _cmd_stability),
     (_add_sweep_command, _cmd_sweep),
+    (_add_optimise_command, _cmd_optimise),
     (_add_example_command, _cmd_example),
     (_add_direct_command, _cmd_direct),
     (_add_cases_command, _cmd_cases),

@@ -1,0 +1,126 @@
+"""The run of `pantohil optimise` (orchestrator/optimise.py checks its request): the search on Dask, the nonlinear
+confirmation of the nominal and the optimised design in the virtual HIL with dropper slackening, and the files:
+optimised_catenary.toml, optimised_case.toml, history.csv, optimise.png and summary.json (written last)."""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+from pantohil.models.case import load_case
+from pantohil.models.catenary.fe.definition import build_definition
+from pantohil.models.errors import InputError
+from pantohil.models.hil.rig_loop import run_loop
+from pantohil.models.progress import progress as progress_bar
+from pantohil.models.storage import write_text_atomic
+
+from .dask_engine import dask_client, worker_count
+from .design_search import JOURNAL, Evaluator, best, search
+from .optimise import STEP, OptimiseRequest, case_overrides, open_folder, prepare, written_case
+from .optimise_report import FIGURE, plot_report, write_history
+from .report import write_json_atomic
+
+CATENARY_OUT = "optimised_catenary.toml"
+CASE_OUT = "optimised_case.toml"
+
+
+def _toml(data: dict) -> str:
+    import tomli_w
+
+    return tomli_w.dumps(data)
+
+
+def nonlinear_check(request: OptimiseRequest, catenary_file: Path, speed_kmh: float) -> dict:
+    """The design in the virtual HIL with dropper slackening at `speed_kmh` (the case's iteration settings): its
+    status and the converged span's statistics."""
+    case = load_case(request.case_path, [*case_overrides(request, speed_kmh, catenary_file), "pfem.droppers=true"])
+    t0 = time.perf_counter()
+    result = run_loop(case)
+    f = result.force_N
+    return {"status": result.status, "spans": result.spans, "std_N": float(f.std()), "max_N": float(f.max()),
+            "min_N": float(f.min()), "seconds": time.perf_counter() - t0}
+
+
+def _search(request: OptimiseRequest, problem, out: Path, scheduler, workers, progress: bool, log) -> tuple:
+    """The Dask search: (evaluator, why it stopped, the workers it had)."""
+    make_raw = partial(problem.space.apply, problem.raw, problem.cat)
+    with dask_client(scheduler, workers) as client, \
+            progress_bar(request.max_designs, f"optimise {request.vary}", "design", progress, leave=True) as bar:
+        def on_new(row):
+            bar.update(1)
+            if row["result"]["feasible"]:
+                bar.set_postfix(std=f"{row['result']['objective_N']:.3f} N")
+
+        evaluator = Evaluator(client, make_raw, problem.points, request.limits.min_dropper_length_m,
+                              out / JOURNAL, request.max_designs, on_new)
+        if evaluator.cache:
+            bar.update(len(evaluator.cache))
+            log(f"continuing: {len(evaluator.cache)} designs already in {out / JOURNAL}")
+        nominal = evaluator.results([problem.x0])[0]
+        if not nominal["feasible"]:
+            raise InputError(f"{request.catenary_file}: the nominal design cannot be evaluated ({nominal['reason']})",
+                             key="catenary")
+        why = search(evaluator, problem.x0, problem.bounds, STEP[request.vary])
+        return evaluator, why, worker_count(client)
+
+
+def run_optimise(request: OptimiseRequest, out: Path, scheduler: str | None = None, workers: int | None = None,
+                 overwrite: bool = False, progress: bool = True, confirm: bool = True, log=print) -> dict:
+    """`pantohil optimise`: search, confirm, write; the summary (also summary.json)."""
+    t0 = time.perf_counter()
+    problem = prepare(request)
+    out = Path(out)
+    open_folder(out, request, overwrite)
+    evaluator, why, n_workers = _search(request, problem, out, scheduler, workers, progress, log)
+    t_search = time.perf_counter() - t0
+    top = best(evaluator)
+    nominal = evaluator.cache[evaluator.order[0]]["result"]
+    x_best = np.array(top["x"])
+    optimised_raw = problem.space.apply(problem.raw, problem.cat, x_best)
+    write_text_atomic(out / CATENARY_OUT, _toml(optimised_raw))
+    write_text_atomic(out / CASE_OUT, _toml(written_case(request, problem, CATENARY_OUT)))
+    load_case(out / CASE_OUT)  # the case written loads as `pantohil run` will load it
+    rows = list(evaluator.cache.values())
+    names = problem.space.variables(problem.cat)
+    write_history(out / "history.csv", rows, names)
+    plot_report(out / FIGURE, problem.cat, build_definition(optimised_raw), rows, nominal, top["result"])
+    checks = {}
+    if confirm:
+        speed = problem.points[0].speed_kmh
+        log(f"nonlinear confirmation at {speed:g} km/h (virtual HIL, droppers slacken)")
+        checks = {"nominal": nonlinear_check(request, Path(request.catenary_file), speed),
+                  "optimised": nonlinear_check(request, out / CATENARY_OUT, speed)}
+    summary = _summary(request, problem, names, nominal, top, why, evaluator, n_workers, t_search, checks, t0)
+    write_json_atomic(out / "summary.json", summary)
+    return summary
+
+
+def _reduction(nominal: dict, optimised: dict) -> dict:
+    """The optimised design against the nominal one: std reduction [%], and max and min changes [N]."""
+    return {"std_reduction_percent": 100.0 * (1.0 - optimised["std_N"] / nominal["std_N"]),
+            "max_change_N": optimised["max_N"] - nominal["max_N"],
+            "min_change_N": optimised["min_N"] - nominal["min_N"]}
+
+
+def _summary(request, problem, names, nominal, top, why, evaluator, n_workers, t_search, checks, t0) -> dict:
+    stats = ("std_N", "max_N", "min_N")
+    speeds = []
+    for n, o in zip(nominal["speeds"], top["result"]["speeds"], strict=True):
+        speeds.append({"speed_kmh": n["speed_kmh"], "nominal": {k: n[k] for k in stats},
+                       "optimised": {k: o[k] for k in stats}, **_reduction(n, o)})
+    nonlinear = {k: v for k, v in checks.items()}
+    if checks:
+        nonlinear.update(_reduction(checks["nominal"], checks["optimised"]))
+    return {"catenary_file": str(request.catenary_file), "case": str(request.case_path), "vary": request.vary,
+            "variables": names, "nominal_x": [float(v) for v in problem.x0], "optimised_x": top["x"],
+            "bounds": problem.bounds, "limits": asdict(request.limits),
+            "objective": "std of the contact force, 0-20 Hz (over several speeds: root of the weighted mean variance)",
+            "nominal_objective_N": nominal["objective_N"], "optimised_objective_N": top["result"]["objective_N"],
+            "speeds": speeds, "nonlinear_confirmation": nonlinear, "stopped": why,
+            "designs": {"in_journal": len(evaluator.cache), "evaluated_now": evaluator.evaluated,
+                        "max_designs": request.max_designs},
+            "workers": n_workers, "timing": {"search_s": t_search, "wall_s": time.perf_counter() - t0},
+            "files": [CATENARY_OUT, CASE_OUT, "history.csv", FIGURE, JOURNAL]}
