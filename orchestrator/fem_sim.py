@@ -156,10 +156,12 @@ class _Passage:
 
     @property
     def blocks_raw(self) -> np.ndarray:
+        """The raw force of the central spans, [span, sample]."""
         return np.stack([self.force[j * self.n - 1:(j + 1) * self.n - 1] for j in self.spans])
 
     @property
     def blocks(self) -> np.ndarray:
+        """The 20 Hz low-passed force of the central spans, [span, sample]."""
         return np.stack([self.filtered[j * self.n - 1:(j + 1) * self.n - 1] for j in self.spans])
 
 
