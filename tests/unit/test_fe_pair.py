@@ -42,6 +42,20 @@ def test_a_second_pantograph_that_never_shares_the_section_leaves_the_first_alon
     assert np.all(pair.forces_N[pair.entry_steps[1]:, 1] > 0.0)  # the second crosses the whole section
 
 
+def test_a_second_pantograph_whose_waves_cannot_reach_the_first_leaves_it_alone():
+    """Trailing 150 m on the 5-span section, the second shares it with the first for its last 1.8 s; the contact
+    wire's waves (sqrt(T / m) = 127.7 m/s, 58 m/s faster than the pantographs) close 105 m of the 150 in that
+    time: the first's force is the single run's to 1e-9 N (measured 1.4e-10 N, the two-point solve's round-off)."""
+    cat, pan = _benchmark()
+    shared_s = (5 * cat.span_m - 150.0) / SPEED  # from the second's entry to the first's exit
+    assert (np.sqrt(cat.contact.tension_N / cat.contact.mass_kg_m) - SPEED) * shared_s < 150.0
+    single = simulate_section(cat, pan, 5, SPEED, DT, reference_height_m=5.3)
+    pair = simulate_points(cat, pan, 5, SPEED, DT, (0.0, -150.0), (5.3, 5.3))
+    n = len(single.force_N)
+    assert pair.entry_steps[1] < n  # on the section together
+    assert np.max(np.abs(pair.forces_N[:n, 0] - single.force_N)) < 1e-9
+
+
 def test_leading_and_trailing_are_the_same_pair_seen_from_the_other_pantograph():
     """The second trailing 100 m behind the first is the first trailing 100 m behind the second: each
     pantograph's force (each with its own reference height) is the other run's other pantograph's, to 1e-9 N

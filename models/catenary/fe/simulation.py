@@ -9,6 +9,10 @@ ref. [25]): the penalty contact with the pantograph (the pantograph's HHT step i
 height for a contact state, so the two are solved together, implicitly) and droppers that carry no
 compression (a slack dropper gets the correction force that cancels its bar's force, Paper C eq. 39,
 here exact at each step). A small active-set loop settles the contact state and the slack set.
+
+Several pantographs (`simulate_points`: a case's second pantograph L behind or ahead of the first, Paper A
+sec. 3.4) each have their own contact row, pantograph state and penalty contact; the active set solves all
+their forces and the slack droppers' corrections together. With one point the step is the same arithmetic.
 """
 from __future__ import annotations
 
