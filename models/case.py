@@ -204,7 +204,8 @@ class Case:
         result that leaves the second out is not the case's."""
         if self.sections.second_pantograph is not None:
             raise CaseError(f"second_pantograph: {what} runs one pantograph; this case has two (two run in "
-                            "`pantohil run`, a virtual HIL of FMUs, and in `pantohil direct`)",
+                            "`pantohil run`, a virtual HIL of FMUs, in `pantohil direct`, `pantohil stability` and "
+                            "`pantohil fem-sim`)",
                             key="second_pantograph")
 
     def reference_height_m(self) -> float:

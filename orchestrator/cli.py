@@ -696,6 +696,12 @@ def _cmd_fem_sim(args) -> int:
     print(f"{s['n_spans']} spans, central {s['central_spans']}: mean {c['mean_N']:.2f} N, std {c['std_N']:.2f} N "
           f"(20 Hz), max {c['max_N']:.1f} N, min {c['min_N']:.1f} N, contact loss {c['contact_loss_pct']:.2f} %; "
           f"{s['timing']['wall_s']:.1f} s")
+    second = s.get("second_pantograph")
+    if second is not None:
+        c = second["contact_force"]
+        print(f"second pantograph, {second['position']} {second['spacing_m']:g} m: mean {c['mean_N']:.2f} N, std "
+              f"{c['std_N']:.2f} N (20 Hz), max {c['max_N']:.1f} N, min {c['min_N']:.1f} N, contact loss "
+              f"{c['contact_loss_pct']:.2f} %")
     print(f"run folder: {args.out}")
     return 0
 

@@ -2,6 +2,7 @@
 run folder; `pantohil compare`: two runs overlaid."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -35,15 +36,18 @@ def run_fem_sim(case: Case, n_spans: int, out_dir: Path, central: int = 3, progr
     """`pantohil fem-sim`: simulate an n-span section of a case's catenary and write its run folder.
 
     summary.json holds the statistics of the central spans after the 20 Hz low-pass; central_spans.csv
-    the force on the PFEM run's grid; also dropper corrections, run.mcap and plots. The folder is checked
-    before the simulation (new or empty; `overwrite` replaces it whole) and appears complete or not at all.
+    the force on the PFEM run's grid; also dropper corrections, run.mcap and plots. With a
+    [second_pantograph], both pantographs cross the section L apart (the second's force in f2_N, in
+    summary.json's second_pantograph and in run.mcap's /pantograph_2), each over the same central spans.
+    The folder is checked before the simulation (new or empty; `overwrite` replaces it whole) and appears
+    complete or not at all.
     """
-    case.refuse_second_pantograph("pantohil fem-sim")
     spans = central_spans(n_spans, central)
     if not case.sections.catenary.definition_file:
         raise CaseError("catenary.definition_file: the case's catenary has no catenary file to build a section from")
     path = (case.source.parent / case.sections.catenary.definition_file).resolve()
     cat = load_definition(path)
+    _check_second_pantograph(case, n_spans, cat.span_m)
     from pantohil.models.catenary.fe.simulation import FE_PANTOGRAPHS
 
     if case.pantograph.model not in FE_PANTOGRAPHS:
@@ -66,77 +70,169 @@ def _simulate(case: Case, cat, n_spans: int, progress: bool):
             bar.n = k
             bar.refresh()
 
-        return simulate_section(cat, case.pantograph, n_spans, case.speed_m_s, case.dt_s,
-                                case.sections.pfem.droppers, progress=tick,
-                                reference_height_m=case.reference_height_m())
+        second = case.sections.second_pantograph
+        if second is None:
+            return simulate_section(cat, case.pantograph, n_spans, case.speed_m_s, case.dt_s,
+                                    case.sections.pfem.droppers, progress=tick,
+                                    reference_height_m=case.reference_height_m())
+        from pantohil.models.catenary.asm.pair import second_offset_m
+        from pantohil.models.catenary.fe.simulation import simulate_points
+        from pantohil.models.hil.pair_loop import pair_reference_heights_m
+
+        return simulate_points(cat, case.pantograph, n_spans, case.speed_m_s, case.dt_s,
+                               (0.0, second_offset_m(second.spacing_m, second.position)),
+                               pair_reference_heights_m(case), case.sections.pfem.droppers, progress=tick)
+
+
+def _check_second_pantograph(case: Case, n_spans: int, span_m: float) -> None:
+    """A second pantograph must be on the section with the first: its spacing shorter than the section."""
+    second = case.sections.second_pantograph
+    if second is not None and second.spacing_m >= n_spans * span_m:
+        raise CaseError(f"second_pantograph.spacing_m: {second.spacing_m:g} m is not shorter than the {n_spans}-span "
+                        f"section ({n_spans * span_m:g} m): the two pantographs would never be on it together",
+                        key="second_pantograph.spacing_m")
+
+
+def passages(res) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """Each pantograph's passage over the section, (its first result row, its force, its position), as many rows
+    as the section's steps: the first's row k is where a single pantograph's is (sample m of span j at row
+    j N + m - 1 of the passage), the second's at its own positions."""
+    if res.forces_N is None:
+        return [(0, res.force_N, res.x_m)]
+    n_steps = len(res.force_N) - max(res.entry_steps)
+    return [(e, res.forces_N[e:e + n_steps, i], res.positions_m[e:e + n_steps, i])
+            for i, e in enumerate(res.entry_steps)]
 
 
 def _write_section(out_dir: Path, case: Case, cat, path: Path, n_spans: int, spans: list[int], res) -> dict:
     """The run folder of a simulated section: tables, run.mcap, plots, and summary.json last."""
     n, dt, slacken = case.samples_per_span, case.dt_s, case.sections.pfem.droppers
-    filtered = lowpass(res.force_N, dt)
-    # sample m of span j is the instant t = (j n + m) dt; result row k is at t = (k + 1) dt
+    # sample m of span j is the instant t = (j n + m) dt of a passage; its row k is at t = (k + 1) dt
     sel = np.concatenate([np.arange(j * n - 1, (j + 1) * n - 1) for j in spans])
-    blocks_raw = np.stack([res.force_N[j * n - 1:(j + 1) * n - 1] for j in spans])
-    blocks = np.stack([filtered[j * n - 1:(j + 1) * n - 1] for j in spans])
+    tracks = [_Passage(e, f, x, lowpass(f, dt), spans, n) for e, f, x in passages(res)]
+    first = tracks[0]
     per_span = len(cat.dropper_positions_m)
     mid = spans[len(spans) // 2]
     d_mid = slice(mid * per_span, (mid + 1) * per_span)
-    corr_mid = res.dropper_correction_N[mid * n - 1:(mid + 1) * n - 1, d_mid]
+    corr_mid = res.dropper_correction_N[first.entry + mid * n - 1:first.entry + (mid + 1) * n - 1, d_mid]
     central_supports = list(range(spans[0], spans[-1] + 2))
+    rows = np.concatenate([t.entry + sel for t in tracks])  # every pantograph's central samples
     summary = {
         "case": case.name, "model": "conventional FE section (HHT, penalty contact, dropper slackening)",
         "catenary_file": str(path), "catenary_label": _label(cat), "n_spans": n_spans, "central_spans": spans,
         "speed_kmh": case.speed_kmh, "dt_s": dt, "samples_per_span": n, "droppers_slacken": slacken,
-        "contact_force": {**force_statistics(filtered[sel]), "filter": f"zero-phase {CUTOFF_HZ:g} Hz low-pass",
-                          "contact_loss_pct": float(100 * np.mean(res.force_N[sel] <= 0.0)),
-                          "raw": force_statistics(res.force_N[sel])},
-        "max_support_uplift_m": float(np.max(res.support_uplift_m[sel][:, central_supports])),
+        "contact_force": _force_summary(first.force, first.filtered, sel),
+        "max_support_uplift_m": float(np.max(res.support_uplift_m[rows][:, central_supports])),
         "droppers": {"slack_steps": [int(c) for c in np.count_nonzero(corr_mid > 0, axis=0)],
                      "max_correction_N": [float(c) for c in corr_mid.max(axis=0)]},
         "timing": {"wall_s": res.wall_s, "steps": len(res.force_N), "peak_memory_MB": res.peak_memory_bytes / 1e6},
         "en50318": "not claimed: the standard's reference model and acceptance ranges were not available",
     }
-    _write_force_tables(out_dir, spans, blocks_raw, blocks, dt, n, corr_mid, per_span)
-    _write_mcap(out_dir, case, n_spans, dt, per_span, res, filtered, d_mid)
-    _write_plots(out_dir, case, n_spans, dt, cat, res, filtered, spans, blocks, corr_mid, mid)
+    if len(tracks) > 1:
+        summary["sample_offset_m"] = first.sample_offset_m(case.speed_m_s * dt)
+        summary["second_pantograph"] = _second_summary(case, tracks[1], sel)
+    _write_force_tables(out_dir, spans, tracks, dt, n, corr_mid, per_span)
+    _write_mcap(out_dir, case, n_spans, dt, per_span, res, tracks, d_mid)
+    _write_plots(out_dir, case, n_spans, dt, cat, tracks, spans, corr_mid, mid)
     report.write_json_atomic(out_dir / "summary.json", summary)
     return summary
 
 
-def _write_force_tables(out_dir: Path, spans, blocks_raw, blocks, dt, n, corr_mid, per_span) -> None:
-    """Write central_spans.csv (raw and low-passed force of the central spans) and dropper_corrections.csv."""
+@dataclass
+class _Passage:
+    """A pantograph's passage over the section: its first result row, force, position and 20 Hz low-pass over
+    the passage, and its central spans' raw and low-passed force (span, sample)."""
+    entry: int
+    force: np.ndarray
+    x: np.ndarray
+    filtered: np.ndarray
+    spans: list[int]
+    n: int
+
+    def sample_offset_m(self, step_m: float) -> float:
+        """How far past j L + m v dt its sample m of span j lies: 0 for the pantograph in front, up to one step's
+        travel for the one behind (the spacing is kept exactly, the steps are the front one's)."""
+        return round(float(self.x[0] - step_m), 12)
+
+    @property
+    def blocks_raw(self) -> np.ndarray:
+        """The raw force of the central spans, [span, sample]."""
+        return np.stack([self.force[j * self.n - 1:(j + 1) * self.n - 1] for j in self.spans])
+
+    @property
+    def blocks(self) -> np.ndarray:
+        """The 20 Hz low-passed force of the central spans, [span, sample]."""
+        return np.stack([self.filtered[j * self.n - 1:(j + 1) * self.n - 1] for j in self.spans])
+
+
+def _force_summary(force: np.ndarray, filtered: np.ndarray, sel: np.ndarray) -> dict:
+    """A pantograph's contact-force statistics over its central samples `sel`: 20 Hz low-passed (EN 50367), its
+    contact loss and the raw force's."""
+    return {**force_statistics(filtered[sel]), "filter": f"zero-phase {CUTOFF_HZ:g} Hz low-pass",
+            "contact_loss_pct": float(100 * np.mean(force[sel] <= 0.0)), "raw": force_statistics(force[sel])}
+
+
+def _second_summary(case: Case, track: _Passage, sel: np.ndarray) -> dict:
+    """summary.json's second_pantograph: spacing, position, model, its force statistics over the same central
+    spans (which it crosses L / v later or earlier), and where its samples lie."""
+    second = case.sections.second_pantograph
+    p = case.pantograph
+    return {"spacing_m": second.spacing_m, "position": second.position,
+            "pantograph": {"model": p.model, "masses_kg": list(p.masses_kg),
+                           "stiffnesses_N_m": list(p.stiffnesses_N_m), "dampings_Ns_m": list(p.dampings_Ns_m),
+                           "contact_stiffness_N_m": p.contact_stiffness_N_m, "uplift_force_N": p.uplift_force_N,
+                           "same_as_first": True},
+            "contact_force": _force_summary(track.force, track.filtered, sel),
+            "entry_s": track.entry * case.dt_s, "sample_offset_m": track.sample_offset_m(case.speed_m_s * case.dt_s)}
+
+
+def _write_force_tables(out_dir: Path, spans, tracks: list[_Passage], dt, n, corr_mid, per_span) -> None:
+    """Write central_spans.csv (raw and low-passed force of the central spans, each pantograph's) and
+    dropper_corrections.csv."""
+    cut = f"{CUTOFF_HZ:g}"
+    header = f"span,t_s,f_N,f_lowpass_{cut}hz_N" + (f",f2_N,f2_lowpass_{cut}hz_N" if len(tracks) > 1 else "")
+    columns = [b for t in tracks for b in (t.blocks_raw, t.blocks)]
     with open(out_dir / "central_spans.csv", "w") as fh:
-        fh.write(f"span,t_s,f_N,f_lowpass_{CUTOFF_HZ:g}hz_N\n")  # the low-pass is of the whole run (no edge effect)
-        for j, blk, flt in zip(spans, blocks_raw, blocks, strict=False):
-            for m, (f, ff) in enumerate(zip(blk, flt, strict=False)):
-                fh.write(f"{j},{m * dt:.6f},{f:.9g},{ff:.9g}\n")
+        fh.write(header + "\n")  # the low-pass is of each whole passage (no edge effect)
+        for s, j in enumerate(spans):
+            for m in range(n):
+                fh.write(f"{j},{m * dt:.6f}," + ",".join(f"{c[s, m]:.9g}" for c in columns) + "\n")
     np.savetxt(out_dir / "dropper_corrections.csv", np.column_stack([np.arange(n) * dt, corr_mid]), delimiter=",",
                header="t_s," + ",".join(f"dropper_{d + 1}_N" for d in range(per_span)), comments="", fmt="%.9g")
 
 
-def _write_mcap(out_dir: Path, case: Case, n_spans: int, dt, per_span, res, filtered, d_mid) -> None:
-    """Write run.mcap: the pantograph's position and force and the middle central span's dropper forces."""
+def _write_mcap(out_dir: Path, case: Case, n_spans: int, dt, per_span, res, tracks: list[_Passage], d_mid) -> None:
+    """Write run.mcap: each pantograph's position and force over its passage (/pantograph, /pantograph_2) and the
+    middle central span's dropper forces."""
+    channel = {"x_m": "pantograph position [m]", "contact_force": "contact force [N]",
+               "filtered_force": f"{CUTOFF_HZ:g} Hz low-pass [N]"}
+    topics = ["/pantograph"] + [f"/pantograph_{i + 1}" for i in range(1, len(tracks))]
     recorder = McapWriter(out_dir / "run.mcap", {
-        "/pantograph": {"x_m": "pantograph position [m]", "contact_force": "contact force [N]",
-                        "filtered_force": f"{CUTOFF_HZ:g} Hz low-pass [N]"},
+        **{topic: channel for topic in topics},
         "/droppers": {f"dropper_{d + 1}": f"force of dropper {d + 1} of the middle central span [N]"
                       for d in range(per_span)}}, {"case": case.name, "n_spans": n_spans, "dt_s": dt})
     try:
-        recorder.write_block("/pantograph", res.t_s, np.column_stack([res.x_m, res.force_N, filtered]))
+        for topic, t in zip(topics, tracks, strict=True):
+            recorder.write_block(topic, res.t_s[t.entry:t.entry + len(t.force)],
+                                 np.column_stack([t.x, t.force, t.filtered]))
         recorder.write_block("/droppers", res.t_s, res.dropper_force_N[:, d_mid].astype(float))
     finally:
         recorder.close()
 
 
-def _write_plots(out_dir: Path, case: Case, n_spans: int, dt, cat, res, filtered, spans, blocks, corr_mid,
+def _write_plots(out_dir: Path, case: Case, n_spans: int, dt, cat, tracks: list[_Passage], spans, corr_mid,
                  mid) -> None:
-    """Plot the force along the section, the central spans overlaid and the dropper corrections."""
-    report.plot_section_force(out_dir / "force_along_section.png", res.x_m, res.force_N, filtered, cat.span_m,
-                              spans, f"{case.title}: {n_spans}-span section, {case.speed_kmh:.0f} km/h")
-    report.plot_force_comparison(out_dir / "central_spans.png", dt,
-                                 {f"span {j} ({CUTOFF_HZ:g} Hz)": blk for j, blk in zip(spans, blocks, strict=False)},
-                                 f"{case.title}: central spans overlaid")
+    """Plot the force along the section (each pantograph's), the central spans overlaid and the dropper
+    corrections."""
+    first = tracks[0]
+    second = None if len(tracks) == 1 else (tracks[1].x, tracks[1].force, tracks[1].filtered)
+    report.plot_section_force(out_dir / "force_along_section.png", first.x, first.force, first.filtered, cat.span_m,
+                              spans, f"{case.title}: {n_spans}-span section, {case.speed_kmh:.0f} km/h", second)
+    overlay = {f"span {j} ({CUTOFF_HZ:g} Hz)": blk for j, blk in zip(spans, first.blocks, strict=False)}
+    for t in tracks[1:]:
+        overlay.update({f"pantograph 2, span {j} ({CUTOFF_HZ:g} Hz)": blk
+                        for j, blk in zip(spans, t.blocks, strict=False)})
+    report.plot_force_comparison(out_dir / "central_spans.png", dt, overlay, f"{case.title}: central spans overlaid")
     report.plot_dropper_corrections(out_dir / "dropper_corrections.png", dt, corr_mid,
                                     f"{case.title}: dropper correction forces, span {mid}")
 

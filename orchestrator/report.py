@@ -157,11 +157,15 @@ def plot_force_history(path: Path, forces: list, per_block: int, title: str) -> 
 
 
 def plot_section_force(path: Path, x: np.ndarray, force: np.ndarray, filtered: np.ndarray, span_m: float,
-                       central: list, title: str) -> None:
-    """Contact force along a finite section, central spans shaded."""
+                       central: list, title: str, second: tuple | None = None) -> None:
+    """Contact force along a finite section, central spans shaded; with `second` (its position, force and
+    low-pass), a second pantograph's too, against its own position."""
     fig, ax = plt.subplots(figsize=(11, 4.5))
     ax.plot(x, force, color="0.6", lw=0.5, label="contact force")
     ax.plot(x, filtered, color="tab:blue", lw=1.0, label="20 Hz low-pass")
+    if second is not None:
+        ax.plot(second[0], second[1], color="tab:pink", lw=0.5, alpha=0.6, label="second pantograph")
+        ax.plot(second[0], second[2], color="tab:red", lw=1.0, label="second pantograph, 20 Hz low-pass")
     ax.axvspan(central[0] * span_m, (central[-1] + 1) * span_m, color="tab:orange", alpha=0.12, label="central spans")
     ax.set_xlabel("pantograph position [m]")
     ax.set_ylabel("contact force [N]")

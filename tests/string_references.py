@@ -8,7 +8,7 @@ import numpy as np
 from scipy import sparse
 
 from pantohil.models.catenary.asm.string import AsmParameters
-from pantohil.models.catenary.fe.simulation import SectionModel
+from pantohil.models.catenary.fe.simulation import ContactTrack, SectionModel, track_positions
 from pantohil.models.catenary.pfem.blocks import ContactBlock, linear_shapes
 from pantohil.models.catenary.pfem.frf import PeriodicBlock
 
@@ -57,3 +57,17 @@ def asm_string_section(asm, span_m: float, n_spans: int, elements_per_span: int,
     empty = np.zeros(0, dtype=int)
     return SectionModel(K, M, asm.alpha_1_s, asm.beta_s, dash, shapes, z0(np.mod(x, span_m)), x, empty, empty,
                         np.zeros(0), np.zeros(0), supports)
+
+
+def asm_string_tracks(asm, span_m: float, n_spans: int, elements_per_span: int, z0, speed_m_s: float, dt_s: float,
+                      offsets_m: tuple[float, ...]) -> tuple[SectionModel, list[ContactTrack]]:
+    """`asm_string_section` with contact points at `offsets_m` from the first (models/catenary/fe/simulation.py's
+    track_positions): the section (its contact line the first point's) and each point's track."""
+    model = asm_string_section(asm, span_m, n_spans, elements_per_span, z0, speed_m_s, dt_s)
+    n = n_spans * elements_per_span + 1
+    nodes = np.arange(n) * (span_m / elements_per_span)
+    tracks = []
+    for x, entry in track_positions(n_spans, span_m, speed_m_s, dt_s, offsets_m):
+        tracks.append(ContactTrack(linear_shapes(nodes, x, n, np.arange(n)).tocsr(), z0(np.mod(x, span_m)), x, entry))
+    model.x_m, model.shapes, model.z_static = tracks[0].x_m, tracks[0].shapes, tracks[0].z_static
+    return model, tracks

@@ -80,3 +80,73 @@ def test_compare_overlays_two_runs(short_run, tmp_path):
     r = json.loads((tmp_path / "cmp" / "compare.json").read_text())
     assert r["rms_difference_N"] == 0.0 and r["std_difference_pct"] == 0.0
     assert (tmp_path / "cmp" / "contact_force.png").stat().st_size > 0
+
+
+PAIR = ["--set", "second_pantograph.spacing_m=100", "--set", 'second_pantograph.position="trailing"']
+
+
+@pytest.fixture(scope="module")
+def pair_run(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("fem") / "pair"
+    proc = pantohil("fem-sim", str(CASE), "--spans", "8", "--central", "2", "--out", str(out), "--quiet", *PAIR)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "second pantograph, trailing 100 m" in proc.stdout
+    return out
+
+
+@pytest.mark.slow
+def test_a_pair_writes_the_second_pantographs_force_summary_and_channel(pair_run):
+    """Two pantographs 100 m apart over 8 spans: central_spans.csv holds both forces over the same spans,
+    summary.json the second's statistics in the first's form, run.mcap a /pantograph_2 channel in the first's
+    schema over its own passage."""
+    from mcap.reader import make_reader
+
+    s = json.loads((pair_run / "summary.json").read_text())
+    second = s["second_pantograph"]
+    assert second["spacing_m"] == 100.0 and second["position"] == "trailing"
+    assert second["pantograph"]["model"] == "chain"
+    assert set(second["contact_force"]) == set(s["contact_force"])
+    assert second["sample_offset_m"] == pytest.approx(0.0, abs=1e-9)  # 100 m = 1440 steps of 69.4 mm
+    header = (pair_run / "central_spans.csv").read_text().splitlines()[0]
+    assert header == "span,t_s,f_N,f_lowpass_20hz_N,f2_N,f2_lowpass_20hz_N"
+    d = np.loadtxt(pair_run / "central_spans.csv", delimiter=",", skiprows=1)
+    assert d.shape == (2 * 792, 6) and list(np.unique(d[:, 0])) == [3, 4]
+    assert np.all(d[:, 4] > 0) and not np.allclose(d[:, 2], d[:, 4])
+    assert np.std(d[:, 5]) == pytest.approx(second["contact_force"]["std_N"], rel=1e-6)
+    with open(pair_run / "run.mcap", "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    counts = {ch.topic: summary.statistics.channel_message_counts[i] for i, ch in summary.channels.items()}
+    assert counts["/pantograph"] == counts["/pantograph_2"] == 8 * 792
+    fields = []
+    for topic in ("/pantograph", "/pantograph_2"):
+        with open(pair_run / "run.mcap", "rb") as fh:
+            schema, channel, msg = next(make_reader(fh).iter_messages(topics=[topic]))
+        fields.append((schema.name, set(json.loads(msg.data))))
+    assert fields[0][1] == fields[1][1] == {"t", "x_m", "contact_force", "filtered_force"}, fields
+    assert (pair_run / "force_along_section.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_a_pair_with_the_second_leading_swaps_the_two_forces(pair_run, tmp_path):
+    """The second leading 100 m is the trailing run seen from the other pantograph: the columns swap."""
+    out = tmp_path / "leading"
+    proc = pantohil("fem-sim", str(CASE), "--spans", "8", "--central", "2", "--out", str(out), "--quiet",
+                    "--set", "second_pantograph.spacing_m=100", "--set", 'second_pantograph.position="leading"')
+    assert proc.returncode == 0, proc.stderr
+    a = np.loadtxt(pair_run / "central_spans.csv", delimiter=",", skiprows=1)
+    b = np.loadtxt(out / "central_spans.csv", delimiter=",", skiprows=1)
+    assert np.allclose(a[:, 2:4], b[:, 4:6], rtol=1e-8) and np.allclose(a[:, 4:6], b[:, 2:4], rtol=1e-8)
+
+
+@pytest.mark.parametrize("overrides,message", [
+    (["second_pantograph.spacing_m=0"], "second_pantograph.spacing_m"),
+    (["second_pantograph.spacing_m=-50"], "second_pantograph.spacing_m"),
+    (["second_pantograph.spacing_m=400"], "not shorter than the 6-span section"),
+    (["second_pantograph.spacing_m=100", 'second_pantograph.position="beside"'], "second_pantograph.position"),
+])
+def test_bad_pair_input_gives_one_line_and_writes_nothing(tmp_path, overrides, message):
+    sets = [a for o in overrides for a in ("--set", o)]
+    proc = pantohil("fem-sim", str(CASE), "--spans", "6", "--central", "2", "--out", str(tmp_path / "x"), *sets)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert not (tmp_path / "x").exists()
