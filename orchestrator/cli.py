@@ -803,6 +803,10 @@ def _add_optimise_command(sub) -> None:
                      help="shortest distance between droppers [m] (default 3)")
     opt.add_argument("--max-designs", type=number(2, 100000, integer=True), default=200,
                      help="most designs evaluated (default 200)")
+    opt.add_argument("--explore", type=number(0, 10000, integer=True), default=24,
+                     help="designs of a first Sobol sample of the limits, evaluated in parallel (default 24)")
+    opt.add_argument("--starts", type=number(1, 100, integer=True), default=3,
+                     help="descents: from the nominal design and the best designs of the sample (default 3)")
     opt.add_argument("--out", type=Path, required=True, help="folder (the same command continues a folder it started)")
     opt.add_argument("--overwrite", action="store_true", help="start again in a used folder")
     opt.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: a LocalCluster)")
@@ -820,7 +824,7 @@ def _cmd_optimise(args) -> int:
     limits = DesignLimits(args.max_height_deviation, args.min_dropper_length, args.min_dropper_spacing)
     request = OptimiseRequest(catalog.resolve(args.catenary_file, "catenary"), catalog.resolve(args.case, "case"),
                               tuple(args.overrides), args.vary, tuple(args.speeds), tuple(args.weights), limits,
-                              args.max_designs)
+                              args.max_designs, args.explore, args.starts)
     try:
         s = run_optimise(request, args.out, args.scheduler, args.workers, args.overwrite, not args.quiet,
                          not args.no_confirm)

@@ -48,6 +48,8 @@ class OptimiseRequest:
     weights: tuple[float, ...] = ()  # empty: equal
     limits: DesignLimits = field(default_factory=DesignLimits)
     max_designs: int = 200
+    explore: int = 24  # designs of the first, parallel sample of the bounds
+    starts: int = 3  # descents: from the nominal design and the best of the sample
 
     def identity(self) -> dict:
         """What makes two requests the same optimisation (the marker of the folder)."""
@@ -55,7 +57,8 @@ class OptimiseRequest:
                 "catenary_sha": _sha(Path(self.catenary_file)),
                 "case": str(Path(self.case_path).resolve()) if self.case_path else None,
                 "overrides": list(self.overrides), "vary": self.vary, "speeds_kmh": list(self.speeds_kmh),
-                "weights": list(self.weights), "limits": asdict(self.limits)}
+                "weights": list(self.weights), "limits": asdict(self.limits), "explore": self.explore,
+                "starts": self.starts}
 
 
 def _sha(path: Path) -> str:
@@ -106,6 +109,8 @@ def prepare(request: OptimiseRequest) -> Problem:
     space = design_space(request.vary)
     if request.max_designs < 2:
         raise InputError(f"--max-designs: at least 2 (got {request.max_designs})", key="--max-designs")
+    if request.starts < 1 or request.explore < 0:
+        raise InputError("--starts: at least 1 descent, and --explore at least 0 designs", key="--starts")
     try:
         raw = load_toml(Path(request.catenary_file), "catenary file")
         cat = load_definition(request.catenary_file)

@@ -18,7 +18,7 @@ from pantohil.models.progress import progress as progress_bar
 from pantohil.models.storage import write_text_atomic
 
 from .dask_engine import dask_client, worker_count
-from .design_search import JOURNAL, Evaluator, best, search
+from .design_search import JOURNAL, Evaluator, best, explore, search, starts
 from .optimise import STEP, OptimiseRequest, case_overrides, open_folder, prepare, written_case
 from .optimise_report import FIGURE, plot_report, write_history
 from .report import write_json_atomic
@@ -49,10 +49,13 @@ def _search(request: OptimiseRequest, problem, out: Path, scheduler, workers, pr
     make_raw = partial(problem.space.apply, problem.raw, problem.cat)
     with dask_client(scheduler, workers) as client, \
             progress_bar(request.max_designs, f"optimise {request.vary}", "design", progress, leave=True) as bar:
+        lowest = [np.inf]
+
         def on_new(row):
             bar.update(1)
             if row["result"]["feasible"]:
-                bar.set_postfix(std=f"{row['result']['objective_N']:.3f} N")
+                lowest[0] = min(lowest[0], row["result"]["objective_N"])
+                bar.set_postfix(best=f"{lowest[0]:.3f} N")
 
         evaluator = Evaluator(client, make_raw, problem.points, request.limits.min_dropper_length_m,
                               out / JOURNAL, request.max_designs, on_new)
@@ -63,8 +66,13 @@ def _search(request: OptimiseRequest, problem, out: Path, scheduler, workers, pr
         if not nominal["feasible"]:
             raise InputError(f"{request.catenary_file}: the nominal design cannot be evaluated ({nominal['reason']})",
                              key="catenary")
-        why = search(evaluator, problem.x0, problem.bounds, STEP[request.vary])
-        return evaluator, why, worker_count(client)
+        explore(evaluator, problem.bounds, request.explore)
+        why = []
+        for x in starts(evaluator, problem.x0, request.starts):
+            why.append(search(evaluator, x, problem.bounds, STEP[request.vary]).rstrip("."))
+            if why[-1].startswith("the design budget"):
+                break
+        return evaluator, f"{len(why)} descents: " + "; ".join(dict.fromkeys(why)), worker_count(client)
 
 
 def run_optimise(request: OptimiseRequest, out: Path, scheduler: str | None = None, workers: int | None = None,
