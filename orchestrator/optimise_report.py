@@ -33,9 +33,11 @@ def _geometry(ax, nominal_cat, optimised_cat) -> None:
         line = np.linspace(0.0, cat.span_m, 400)
         ax.plot(line, 1e3 * cat.design_height(line), style, lw=1, label=label)
         ax.plot(x, 1e3 * cat.design_height(x), style[:-1] + "o", ms=4)
+        for xd in x:  # the dropper positions, which a spacing design moves
+            ax.axvline(xd, color=style[0] if style[0] != "k" else "0.3", ls=style[1:], lw=0.6, alpha=0.6)
     ax.set_xlabel("position in the span [m]")
     ax.set_ylabel("contact-wire design height [mm]")
-    ax.set_title("geometry (markers: droppers)")
+    ax.set_title("geometry (markers and vertical lines: droppers)")
     ax.legend(fontsize=8)
 
 
