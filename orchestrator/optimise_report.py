@@ -28,13 +28,13 @@ def write_history(path: Path, rows: list[dict], names: list[str]) -> None:
 
 
 def _geometry(ax, nominal_cat, optimised_cat) -> None:
-    for cat, label, style in ((nominal_cat, "nominal", "k--"), (optimised_cat, "optimised", "C0-")):
+    for cat, label, colour, ls in ((nominal_cat, "nominal", "k", "--"), (optimised_cat, "optimised", "C0", "-")):
         x = np.array(cat.dropper_positions_m)
         line = np.linspace(0.0, cat.span_m, 400)
-        ax.plot(line, 1e3 * cat.design_height(line), style, lw=1, label=label)
-        ax.plot(x, 1e3 * cat.design_height(x), style[:-1] + "o", ms=4)
+        ax.plot(line, 1e3 * cat.design_height(line), color=colour, ls=ls, lw=1, label=label)
+        ax.plot(x, 1e3 * cat.design_height(x), "o", color=colour, ms=4)
         for xd in x:  # the dropper positions, which a spacing design moves
-            ax.axvline(xd, color=style[0] if style[0] != "k" else "0.3", ls=style[1:], lw=0.6, alpha=0.6)
+            ax.axvline(xd, color=colour, ls=ls, lw=0.6, alpha=0.5)
     ax.set_xlabel("position in the span [m]")
     ax.set_ylabel("contact-wire design height [mm]")
     ax.set_title("geometry (markers and vertical lines: droppers)")
