@@ -147,7 +147,8 @@ def explore(evaluator: Evaluator, bounds: list[tuple[float, float]], count: int,
 
 
 def starts(evaluator: Evaluator, x0: np.ndarray, count: int) -> list[np.ndarray]:
-    """The nominal design and the best feasible ones evaluated so far, `count` in all."""
+    """The nominal design and the best feasible ones evaluated so far, at most `count` in all (fewer where the
+    sample found no other design that can be built: heights far from the nominal ones compress droppers)."""
     rows = sorted((r for r in evaluator.cache.values() if r["result"]["feasible"]),
                   key=lambda r: r["result"]["objective_N"])
     out = [np.asarray(x0, dtype=float)]

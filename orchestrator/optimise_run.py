@@ -72,7 +72,7 @@ def _search(request: OptimiseRequest, problem, out: Path, scheduler, workers, pr
             why.append(search(evaluator, x, problem.bounds, STEP[request.vary]).rstrip("."))
             if why[-1].startswith("the design budget"):
                 break
-        return evaluator, f"{len(why)} descents: " + "; ".join(dict.fromkeys(why)), worker_count(client)
+        return evaluator, f"descents {len(why)}: " + "; ".join(dict.fromkeys(why)), worker_count(client)
 
 
 def run_optimise(request: OptimiseRequest, out: Path, scheduler: str | None = None, workers: int | None = None,

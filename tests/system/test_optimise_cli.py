@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import pytest
 from conftest import CATENARIES_DIR as CATENARIES
@@ -31,7 +32,7 @@ def test_bad_input_is_one_line_and_nothing_is_written(tmp_path, extra, message):
 
 def test_a_catenary_file_the_builder_refuses_is_named(tmp_path):
     bad = tmp_path / "bad.toml"
-    bad.write_text(open(STITCHED, encoding="utf-8").read().replace("span_m = 65.0", "span_m = -65.0"))
+    bad.write_text(Path(STITCHED).read_text(encoding="utf-8").replace("span_m = 65.0", "span_m = -65.0"))
     out = tmp_path / "opt"
     done = pantohil("optimise", str(bad), *AT_300, "--vary", "heights", "--out", str(out), "--quiet")
     assert done.returncode == 2 and "catenary.span_m" in done.stderr and len(done.stderr.strip().splitlines()) == 1
