@@ -70,6 +70,10 @@ def main() -> None:
             fem_red = 100 * (1 - fem / nominal)
             print(f"{v:8s}: fem-sim std {fem:.2f} N against the PFEM's {pfem:.2f} N ({100 * (fem / pfem - 1):+.2f} %); "
                   f"reduction {fem_red:.2f} % against the PFEM's {pfem_red:.2f} % ({fem_red - pfem_red:+.2f} points)")
+            c = s["nonlinear_confirmation"]
+            hil, hil_red = c["optimised"]["std_N"], c["std_reduction_percent"]
+            print(f"{'':8s}  against the PFEM HIL with dropper slackening: std {hil:.2f} N "
+                  f"({100 * (fem / hil - 1):+.2f} %), reduction {hil_red:.2f} % ({fem_red - hil_red:+.2f} points)")
     print(f"folders in {root}")
 
 
