@@ -32,6 +32,7 @@ SHORT = {  # a command's first words -> overrides that keep it short (the comman
     "pantohil run paper_b_mass_300 --hardware": "--set run.max_spans=3",
     "pantohil run --master libcosim": "--set run.max_spans=3",
     "pantohil run --set second_pantograph.spacing_m=200": "--set run.max_spans=3",
+    "pantohil optimise": "--max-designs 8 --explore 0 --no-confirm",
 }
 READY = {"pantohil rig-emulator": ("stdout", "listening on"), "dask scheduler": ("stderr", "Scheduler at"),
          "dask worker": ("stderr", "Registered to")}
@@ -55,6 +56,11 @@ EXPECT = {
     "pantohil stability --fmax 2:40:10 --contact-stiffness 1e4:1e6:10:log --out runs/stab":
         Expect(files=("runs/stab/stability.csv", "runs/stab/summary.json")),
     "pantohil run": Expect(),
+    "pantohil stability --set second_pantograph.spacing_m=70 --set hil.max_frequency_hz=10 --relaxation 0.3 "
+    "--out runs/pair_stab": Expect(files=("runs/pair_stab/stability.csv", "runs/pair_stab/summary.json")),
+    "pantohil optimise paper_a_stitched --case pfem_stitched_250 --set run.speed_kmh=300 --vary heights "
+    "--out runs/oc1": Expect(files=("runs/oc1/optimised_catenary.toml", "runs/oc1/optimised_case.toml",
+                                    "runs/oc1/summary.json")),
     "pantohil run --master libcosim --out runs/libcosim": Expect((1,), ("runs/libcosim/summary.json",)),
     "pantohil run system.ssp --out runs/ssp": Expect(files=("runs/ssp/summary.json",),
                                                      setup="pantohil build --ssp system.ssp --out fmus"),

@@ -17,7 +17,7 @@ from pantohil.models.errors import EXIT_CODE_MEANINGS, ExitCode, InputError, Pan
 ROOT = Path(__file__).resolve().parents[2]
 SIGNAL_CODES = {129, 130, 143}  # 128 + SIGHUP, SIGINT, SIGTERM
 # control flow inside one module, never seen by a caller of the library or the command line
-INTERNAL = {"RunInterrupted", "_Stop", "RunGone", "_ParentGone"}
+INTERNAL = {"RunInterrupted", "_Stop", "RunGone", "_ParentGone", "BudgetSpent"}
 
 
 def test_a_run_with_no_c_compiler_on_path_is_one_line_exit_2_and_writes_nothing(tmp_path):
