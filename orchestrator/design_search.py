@@ -14,7 +14,6 @@ them. It is deterministic (a seeded sample), so a resumed one retraces its steps
 from __future__ import annotations
 
 import json
-import time
 from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,7 +54,7 @@ def read_journal(path: Path) -> dict[str, dict]:
 
 @dataclass
 class Evaluator:
-    """Designs to results, through the cache and the journal first, then Dask; counts what it evaluated."""
+    """Designs to results, through the cache and the journal first, then Dask; counts what it evaluated now."""
 
     client: object
     make_raw: object  # x -> the design's catenary TOML (dict)
@@ -65,9 +64,7 @@ class Evaluator:
     max_designs: int
     on_new: object = None  # called with (row) after each new evaluation (progress, log)
     cache: dict = field(default_factory=dict)
-    order: list = field(default_factory=list)  # keys in the order the search asked for them
     evaluated: int = 0
-    seconds: float = 0.0
 
     def __post_init__(self):
         self.cache.update(read_journal(self.journal))
@@ -79,7 +76,6 @@ class Evaluator:
         if todo and len(self.cache) + len(todo) > self.max_designs:
             raise BudgetSpent
         if todo:
-            t0 = time.perf_counter()
             futures = self.client.map(evaluate_design, [self.make_raw(x) for _, x in todo],
                                       [self.points] * len(todo), [self.min_dropper_length_m] * len(todo),
                                       [True] * len(todo), pure=False)
@@ -91,10 +87,6 @@ class Evaluator:
                 self.evaluated += 1
                 if self.on_new is not None:
                     self.on_new(row)
-            self.seconds += time.perf_counter() - t0
-        for k in keys:
-            if k not in self.order:
-                self.order.append(k)
         return [self.cache[k]["result"] for k in keys]
 
 

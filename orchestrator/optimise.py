@@ -10,7 +10,6 @@ folder it started), and at the end the optimised catenary file, a case for it, t
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -18,7 +17,7 @@ import numpy as np
 
 from pantohil.models.case import apply_overrides, load_case, load_case_dict
 from pantohil.models.catenary.design import DesignLimits, check_symmetric, design_space
-from pantohil.models.catenary.fe.definition import CatenaryError, load_definition
+from pantohil.models.catenary.fe.definition import CatenaryError, build_definition
 from pantohil.models.catenary.fe.model import form_find
 from pantohil.models.catenary.pfem.design_evaluation import SpeedPoint
 from pantohil.models.catenary.pfem.steady_state import span_frequencies_rad_s
@@ -77,7 +76,6 @@ class Problem:
     x0: np.ndarray
     bounds: list
     points: list[SpeedPoint]
-    cases: list  # the case at each speed (for the nonlinear confirmation and the written case)
 
 
 def case_overrides(request: OptimiseRequest, speed_kmh: float | None, catenary_file: Path) -> list[str]:
@@ -87,21 +85,20 @@ def case_overrides(request: OptimiseRequest, speed_kmh: float | None, catenary_f
             *speed, f"hil.max_frequency_hz={QUALITY_BAND_HZ:g}"]
 
 
-def speed_points(request: OptimiseRequest) -> tuple[list[SpeedPoint], list]:
-    """The case at every speed asked (the case's own if none) and its operator settings, pantograph receptance
-    at the span's harmonics and EN 50367 mean force."""
+def speed_points(request: OptimiseRequest) -> list[SpeedPoint]:
+    """At every speed asked (the case's own if none): the case's operator settings, pantograph receptance at the
+    span's harmonics and EN 50367 mean force."""
     speeds = request.speeds_kmh or (None,)
     weights = request.weights or (1.0,) * len(speeds)
     if len(weights) != len(speeds):
         raise InputError(f"--weights: {len(weights)} weights for {len(speeds)} speeds", key="--weights")
-    points, cases = [], []
+    points = []
     for speed, weight in zip(speeds, weights, strict=True):
         case = load_case(request.case_path, case_overrides(request, speed, request.catenary_file))
         w = span_frequencies_rad_s(case.samples_per_span, case.dt_s, case.n_harmonics)
         points.append(SpeedPoint(case.speed_kmh, case.pfem_settings(), receptance(case.pantograph, w),
                                  case.pantograph.uplift_force_N, float(weight)))
-        cases.append(case)
-    return points, cases
+    return points
 
 
 def prepare(request: OptimiseRequest) -> Problem:
@@ -113,7 +110,7 @@ def prepare(request: OptimiseRequest) -> Problem:
         raise InputError("--starts: at least 1 descent, and --explore at least 0 designs", key="--starts")
     try:
         raw = load_toml(Path(request.catenary_file), "catenary file")
-        cat = load_definition(request.catenary_file)
+        cat = build_definition(raw, Path(request.catenary_file))
         nominal = form_find(cat, 3)
     except CatenaryError as exc:
         raise InputError(f"{request.catenary_file}: {exc}", key=exc.key) from None
@@ -125,13 +122,12 @@ def prepare(request: OptimiseRequest) -> Problem:
                          key="--min-dropper-length")
     if any(w <= 0 for w in request.weights):
         raise InputError("--weights: every weight must be positive", key="--weights")
-    points, cases = speed_points(request)
-    return Problem(raw, cat, space, space.start(cat), space.bounds(cat, request.limits), points, cases)
+    return Problem(raw, cat, space, space.start(cat), space.bounds(cat, request.limits), speed_points(request))
 
 
-def open_folder(out: Path, request: OptimiseRequest, overwrite: bool) -> bool:
-    """The output folder: new (True), or one this same optimisation started (False: it continues); another
-    optimisation's folder is refused in one line."""
+def open_folder(out: Path, request: OptimiseRequest, overwrite: bool) -> None:
+    """The output folder: new, or one this same optimisation started (it continues); another optimisation's
+    folder is refused in one line."""
     marker = Path(out) / MARKER
     if marker.exists() and not overwrite:
         try:
@@ -141,7 +137,7 @@ def open_folder(out: Path, request: OptimiseRequest, overwrite: bool) -> bool:
         if previous != request.identity():
             raise InputError(f"--out {out}: holds another optimisation ({MARKER} differs); use a new folder or "
                              "--overwrite", key="--out")
-        return False
+        return
     check_output_folder(Path(out), "--out", overwrite)
     if overwrite and Path(out).exists():
         import shutil
@@ -149,7 +145,6 @@ def open_folder(out: Path, request: OptimiseRequest, overwrite: bool) -> bool:
         shutil.rmtree(out)
     Path(out).mkdir(parents=True, exist_ok=True)
     write_json_atomic(marker, request.identity())
-    return True
 
 
 def written_case(request: OptimiseRequest, problem: Problem, catenary_name: str) -> dict:
@@ -167,8 +162,3 @@ def written_case(request: OptimiseRequest, problem: Problem, catenary_name: str)
     head["description"] = (f"{head.get('description', '')} | catenary optimised over the {request.vary} by pantohil "
                            f"optimise at {', '.join(f'{p.speed_kmh:g}' for p in problem.points)} km/h")
     return raw
-
-
-def elapsed(t0: float) -> float:
-    """Seconds since t0."""
-    return time.perf_counter() - t0

@@ -18,7 +18,7 @@ from pantohil.models.progress import progress as progress_bar
 from pantohil.models.storage import write_text_atomic
 
 from .dask_engine import dask_client, worker_count
-from .design_search import JOURNAL, Evaluator, best, explore, search, starts
+from .design_search import JOURNAL, Evaluator, best, design_key, explore, search, starts
 from .optimise import STEP, OptimiseRequest, case_overrides, open_folder, prepare, written_case
 from .optimise_report import FIGURE, plot_report, write_history
 from .report import write_json_atomic
@@ -85,7 +85,7 @@ def run_optimise(request: OptimiseRequest, out: Path, scheduler: str | None = No
     evaluator, why, n_workers = _search(request, problem, out, scheduler, workers, progress, log)
     t_search = time.perf_counter() - t0
     top = best(evaluator)
-    nominal = evaluator.cache[evaluator.order[0]]["result"]
+    nominal = evaluator.cache[design_key(problem.x0)]["result"]
     x_best = np.array(top["x"])
     optimised_raw = problem.space.apply(problem.raw, problem.cat, x_best)
     write_text_atomic(out / CATENARY_OUT, _toml(optimised_raw))

@@ -159,9 +159,3 @@ def design_space(name: str) -> DesignSpace:
     if name not in DESIGNS:
         raise InputError(f"--vary: unknown design variable {name!r} (choose from {', '.join(DESIGNS)})", key="--vary")
     return DESIGNS[name]
-
-
-def within(x: np.ndarray, bounds: list[tuple[float, float]], tol: float = 1e-9) -> bool:
-    """Within the bounds."""
-    lo, hi = np.array(bounds).T
-    return bool(np.all(x >= lo - tol) and np.all(x <= hi + tol))
