@@ -7,7 +7,6 @@ finishes it by itself if the run's process dies, so a run that stops early stays
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import errno
 import fcntl
 import logging
@@ -101,50 +100,26 @@ class McapWriter:
 
 
 PIPE_BYTES = 1 << 20  # a span of samples fits: handing it over never blocks the stepping loop
-PR_SET_PDEATHSIG = 1
-PARENT_GONE_SIGNAL = signal.SIGUSR1
 WRITE_FAILED = 75  # exit code of a writer process whose file could not be written
+POLL_S = 0.25  # how often a writer waiting for the next message looks whether its parent is still there
 
 
-class _ParentGone(Exception):
-    pass
-
-
-_child = {"waiting": False, "parent_gone": False}
-
-
-def _on_parent_gone(_signum, _frame):
-    _child["parent_gone"] = True
-    if _child["waiting"]:  # only a blocking read is interrupted, never a write into the file
-        raise _ParentGone
-
-
-def _detach_from_parent(parent_pid: int) -> None:
-    """The writer outlives a Ctrl-C to the process group (it stops when its parent says so, or dies),
-    and is told by the kernel when its parent dies, even by SIGKILL."""
+def _detach_from_parent() -> None:
+    """The writer outlives a Ctrl-C to the process group: it stops when its parent says so, or dies."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     signal.signal(signal.SIGHUP, signal.SIG_IGN)  # a closed terminal: the parent stops, then closes the file
-    signal.signal(PARENT_GONE_SIGNAL, _on_parent_gone)
-    with contextlib.suppress(OSError, AttributeError):  # not Linux: the pipe's end of file still tells
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(PARENT_GONE_SIGNAL), 0, 0, 0)
-    if os.getppid() != parent_pid:  # died before prctl took effect
-        _child["parent_gone"] = True
 
 
-def _receive(conn):
-    """The next message; None at "close", at the end of the pipe, or once the parent is dead and the
-    pipe holds nothing more."""
+def _receive(conn, parent_pid: int):
+    """The next message; None at "close", at the end of the pipe, or once the parent is dead (this
+    process was handed to another) and the pipe holds nothing more. A message is read only once the
+    pipe has bytes, and is never interrupted: a signal's exception could drop a message already read."""
     try:
-        if _child["parent_gone"] and not conn.poll(0):
-            return None
-        _child["waiting"] = True
-        try:
-            msg = conn.recv()
-        finally:
-            _child["waiting"] = False
-    except _ParentGone:
-        return _receive(conn)
+        while not conn.poll(POLL_S):
+            if os.getppid() != parent_pid:
+                return None
+        msg = conn.recv()
     except (EOFError, OSError):  # the run's process is gone: finish what we have
         return None
     return None if msg[0] == "close" else msg
@@ -152,12 +127,12 @@ def _receive(conn):
 
 def _writer_process(conn, send_end, parent_pid: int, path: str, groups: dict, metadata: dict | None) -> None:
     send_end.close()  # only the parent may hold the writing end: its death is then an end of file here
-    _detach_from_parent(parent_pid)
+    _detach_from_parent()
     background_priority()  # the stepping loop and a rig emulator on this machine come first
     writer = None
     try:
         writer = McapWriter(Path(path), groups, metadata)
-        while (msg := _receive(conn)) is not None:
+        while (msg := _receive(conn, parent_pid)) is not None:
             if msg[0] == "block":
                 writer.write_block(*msg[1:])
             elif msg[0] == "event":
