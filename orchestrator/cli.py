@@ -717,6 +717,11 @@ def _cmd_compare(args) -> int:
     print(f"std {r['a']['std_N']:.2f} N ({r['a']['label']}) vs {r['b']['std_N']:.2f} N ({r['b']['label']}): "
           f"{r['std_difference_pct']:+.2f} %; rms difference {r['rms_difference_N']:.2f} N = "
           f"{r['rms_difference_pct_of_std_b']:.2f} % of the second std")
+    second = r.get("second_pantograph")
+    if second is not None and second["std_difference_pct"] is not None:
+        print(f"second pantograph: std {second['a']['std_N']:.2f} N vs {second['b']['std_N']:.2f} N: "
+              f"{second['std_difference_pct']:+.2f} %; rms difference {second['rms_difference_N']:.2f} N = "
+              f"{second['rms_difference_pct_of_std_b']:.2f} % of the second std")
     return 0
 
 

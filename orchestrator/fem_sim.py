@@ -260,24 +260,46 @@ def _force_table(run: Path, name: str, columns: int) -> np.ndarray:
     return d
 
 
-def span_force(run: Path) -> tuple[np.ndarray, float, str]:
+def span_force(run: Path, point: int = 0) -> tuple[np.ndarray, float, str]:
     """One span of contact force of a run folder, 20 Hz low-passed: the converged span of a HIL run or
-    the mean of the central spans of a fem-sim run."""
+    the mean of the central spans of a fem-sim run; `point` 1: the second pantograph's, in the order of its
+    own positions (a HIL run records it when the first is at x_n; it is then at x_n + offset)."""
     run = Path(run)
     s = read_summary(run)
     dt = _summary_dt(s, run)
+    if point and not isinstance(s.get("second_pantograph"), dict):
+        raise CaseError(f"{run}: the run has no second pantograph")
     if (run / CENTRAL_SPANS).exists():
-        d = _force_table(run, CENTRAL_SPANS, 4)
+        d = _force_table(run, CENTRAL_SPANS, 6 if point else 4)
         spans = [int(j) for j in np.unique(d[:, 0])]
-        blocks = [d[d[:, 0] == j, 3] for j in spans]
+        blocks = [d[d[:, 0] == j, 5 if point else 3] for j in spans]
         if len({len(b) for b in blocks}) != 1:
             raise CaseError(f"run table {run / CENTRAL_SPANS}: its spans hold different numbers of samples")
         return np.stack(blocks).mean(axis=0), dt, f"fem-sim {s.get('n_spans')} spans (mean of spans {spans})"
     if (run / STEADY_SPAN).exists():
-        d = _force_table(run, STEADY_SPAN, 4)
+        d = _force_table(run, STEADY_SPAN, 7 if point else 4)
         model = s.get("catenary", {}).get("model") if isinstance(s.get("catenary"), dict) else None
-        return lowpass_periodic(d[:, 3], dt, CUTOFF_HZ), dt, f"HIL {model} ({s.get('case')})"
+        force = lowpass_periodic(d[:, 6 if point else 3], dt, CUTOFF_HZ)
+        if point:
+            force = np.roll(force, _second_shift(s, len(force), dt, run))
+        return force, dt, f"HIL {model} ({s.get('case')})"
     raise CaseError(f"{run}: neither steady_span.csv nor central_spans.csv")
+
+
+def _second_shift(s: dict, n: int, dt: float, run: Path) -> int:
+    """The samples s with the second pantograph at x_n + offset = x_(n+s) (mod span): a whole number, else a
+    CaseError (its force is then on another grid than a section's)."""
+    from pantohil.models.catenary.asm.pair import second_offset_m
+
+    second = s["second_pantograph"]
+    try:
+        step = float(s["speed_kmh"]) / 3.6 * dt
+        shift = second_offset_m(float(second["spacing_m"]), second["position"]) / step
+    except (KeyError, TypeError, ValueError):
+        raise CaseError(f"{run / 'summary.json'}: its second_pantograph has no spacing and position") from None
+    if abs(shift - round(shift)) > 1e-6:
+        raise CaseError(f"{run}: the second pantograph is not a whole number of samples from the first")
+    return int(round(shift)) % n
 
 
 def correction_measures(corrections: np.ndarray, dt_s: float) -> dict:
@@ -333,10 +355,27 @@ def compare_runs(a: Path, b: Path, out_dir: Path, overwrite: bool = False) -> di
            "rms_difference_N": rms,
            "rms_difference_pct_of_std_b": _percent_of(rms, std_ref, fb),
            "filter": f"zero-phase {CUTOFF_HZ:g} Hz low-pass"}
+    second = _second_comparison(Path(a), Path(b))
+    if second is not None:
+        res["second_pantograph"] = second
     droppers = _dropper_tables(Path(a), Path(b))  # every input read before anything is written
     with atomic_output_folder(out_dir, "--out", overwrite) as part:
         _write_comparison(part, res, (fa, dta, la), (fb, dtb, lb), droppers)
     return res
+
+
+def _second_comparison(a: Path, b: Path) -> dict | None:
+    """Both runs' second pantographs compared as the first (std difference, RMS difference in % of b's std),
+    where both have one."""
+    if not all(isinstance(read_summary(r).get("second_pantograph"), dict) for r in (a, b)):
+        return None
+    fa, _, _ = span_force(a, 1)
+    fb, _, _ = span_force(b, 1)
+    std_ref = float(np.std(fb))
+    rms = float(np.sqrt(np.mean((fa - fb) ** 2)))
+    return {"a": force_statistics(fa), "b": force_statistics(fb),
+            "std_difference_pct": _percent_of(float(np.std(fa)) - std_ref, std_ref, fb), "rms_difference_N": rms,
+            "rms_difference_pct_of_std_b": _percent_of(rms, std_ref, fb)}
 
 
 def _write_comparison(out_dir: Path, res: dict, run_a: tuple, run_b: tuple, droppers) -> None:

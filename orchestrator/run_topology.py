@@ -103,6 +103,9 @@ def run_topology(case: Case, options: RunOptions) -> Topology:
     """The loop of the run (a hardware run connects only the horizon's H - 1 heights), with the rig-paced
     link's fields and, for a slackening PFEM, the dropper corrections logged."""
     pair = case.sections.second_pantograph is not None
+    check_pair = getattr(catenary_model(case), "check_pair", None)
+    if pair and check_pair is not None:
+        check_pair(case, hardware=options.hardware is not None)
     topology = {(False, False): VIRTUAL, (False, True): PAIR, (True, False): HARDWARE,
                 (True, True): HARDWARE_PAIR}[(options.hardware is not None, pair)]
     if options.hardware is not None:

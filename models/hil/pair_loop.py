@@ -38,13 +38,17 @@ class PairLoopResult:
 
 
 def check_pair_case(case: Case) -> None:
-    """A two-pantograph case this loop runs: the ASM2 string, the rig's latency compensated in whole steps."""
+    """A two-pantograph case this loop runs: ASM2 or the PFEM (what its `check_pair` allows), the rig's latency
+    compensated in whole steps."""
     second = case.sections.second_pantograph
     if second is None:
         raise CaseError("second_pantograph: the case has no [second_pantograph] section", key="second_pantograph")
-    if not hasattr(catenary_model(case), "pair_iteration"):
-        raise CaseError(f"second_pantograph: two pantographs run on catenary.model = \"asm\" (not {case.model!r})",
-                        key="second_pantograph")
+    model = catenary_model(case)
+    if not hasattr(model, "pair_iteration"):
+        raise CaseError(f"second_pantograph: two pantographs run on catenary.model = \"asm\" or \"pfem\" (not "
+                        f"{case.model!r})", key="second_pantograph")
+    if hasattr(model, "check_pair"):
+        model.check_pair(case)
     if case.compensates_rig_response:
         raise CaseError("second_pantograph: with a rig file, set hil.rig_compensation = \"delay\" (the rig's "
                         "response is not compensated for two pantographs)", key="hil.rig_compensation")

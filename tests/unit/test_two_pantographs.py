@@ -97,12 +97,20 @@ def test_the_closed_form_here_is_pantohils_direct_one():
     assert rms_error_of_std(mine[1], lead.force_series(n)) < 1e-9
 
 
-def test_a_second_pantograph_runs_on_the_asm_string_only():
+def test_a_second_pantograph_runs_where_the_catenary_model_allows():
+    """ASM2 runs any pair; the PFEM a virtual one with linear droppers, no coupling compensation and the second
+    point a whole number of samples from the first (models/catenary/pfem/model.py `check_pair`)."""
+    from pantohil.models.errors import InputError
     from pantohil.models.hil.pair_loop import check_pair_case
 
     with pytest.raises(CaseError, match="second_pantograph: the case has no"):
         check_pair_case(load_case())
-    pfem = load_case(None, ["second_pantograph.spacing_m=200", 'catenary.model="pfem"',
-                            'catenary.definition_file="../catenaries/benchmark_simple.toml"'])
-    with pytest.raises(CaseError, match='two pantographs run on catenary.model = "asm"'):
-        check_pair_case(pfem)
+    pfem = ["second_pantograph.spacing_m=200", 'catenary.model="pfem"',
+            'catenary.definition_file="../catenaries/benchmark_simple.toml"', "pfem.droppers=true",
+            "second_pantograph.coupling_compensation=false"]
+    with pytest.raises(InputError, match="pfem.droppers: two pantographs on the PFEM"):
+        check_pair_case(load_case(None, pfem))
+    with pytest.raises(InputError, match="second_pantograph.coupling_compensation: not on the PFEM"):
+        check_pair_case(load_case(None, [*pfem, "pfem.droppers=false", "second_pantograph.coupling_compensation=true"]))
+    with pytest.raises(InputError, match="second_pantograph.spacing_m: .* whole number of samples"):
+        check_pair_case(load_case(None, [*pfem, "pfem.droppers=false", "second_pantograph.spacing_m=200.01"]))

@@ -11,10 +11,13 @@ import math
 from collections.abc import Mapping
 from pathlib import Path
 
+from pantohil.models.catenary.asm.pair import second_offset_m
 from pantohil.models.catenary.grid import SpanGrid
 from pantohil.models.catenary.pfem.operator_file import load_operators
+from pantohil.models.catenary.pfem.pair_operators import PAIR_FILE, load_cross_operators, pair_operators, sample_shift
 from pantohil.models.errors import InputError
 from pantohil.models.hil.droppers import PfemHil
+from pantohil.models.hil.pfem_pair import PfemPairHil
 
 OPERATOR_FILE = "operators.npz"
 MAX_DROPPERS = 12  # the dropper outputs the catenary FMU declares
@@ -50,20 +53,34 @@ class PfemModel:
         return case_operators(case, progress).summary()
 
     def stage(self, case, folder: Path, link: bool = False) -> list[Path]:
-        """operators.npz (copied, or linked to the cache entry)."""
+        """operators.npz (copied, or linked to the cache entry); with a second pantograph also the pair's cross
+        operators (pair_operators.npz)."""
         import shutil
 
-        from .operator_cache import case_operators
+        from .operator_cache import case_cross_operators, case_operators
 
-        source = Path(case_operators(case, progress=False).path).resolve()
-        if link:
-            (folder / OPERATOR_FILE).symlink_to(source)
-        else:
-            shutil.copy2(source, folder / OPERATOR_FILE)
-        return [folder / OPERATOR_FILE]
+        sources = {OPERATOR_FILE: Path(case_operators(case, progress=False).path).resolve()}
+        second = case.sections.second_pantograph
+        if second is not None:
+            offset = second_offset_m(second.spacing_m, second.position)
+            sources[PAIR_FILE] = case_cross_operators(case, offset, progress=False).resolve()
+        for name, source in sources.items():
+            if link:
+                (folder / name).symlink_to(source)
+            else:
+                shutil.copy2(source, folder / name)
+        return [folder / name for name in sources]
 
     def iteration(self, grid: SpanGrid, parameters: Mapping[str, object], resources: Path, settings, compensation):
         """PfemHil on the staged operators, which must be of this grid (Paper C eqs. 34-40, Paper D eqs. 11-12)."""
+        ops = self._staged_operators(grid, resources)
+        hil = PfemHil(ops, settings, float(parameters["dropper_relaxation"]), bool(parameters["droppers"]),
+                      compensation)
+        return hil, ops.z0
+
+    @staticmethod
+    def _staged_operators(grid: SpanGrid, resources: Path):
+        """The staged operators.npz, which must be of this grid."""
         ops = load_operators(Path(resources) / OPERATOR_FILE)
         s = ops.settings
         if (s.samples_per_span != grid.samples_per_span or abs(s.dt_s - grid.dt_s) > 1e-12
@@ -74,15 +91,55 @@ class PfemModel:
         if ops.n_droppers > MAX_DROPPERS:
             raise ValueError(f"the PFEM block has {ops.n_droppers} droppers; the catenary FMU reports at most "
                              f"{MAX_DROPPERS}")
-        hil = PfemHil(ops, settings, float(parameters["dropper_relaxation"]), bool(parameters["droppers"]),
-                      compensation)
-        return hil, ops.z0
+        return ops
+
+    def check_pair(self, case, hardware: bool = False) -> None:
+        """What the PFEM pair runs (models/hil/pfem_pair.py): virtual, linear droppers, no coupling compensation.
+        A dropper slackened by one pantograph is not coupled to the other pantograph's point and droppers
+        (measured: the trailing pantograph 9 % above `pantohil fem-sim` in std), so slackening is refused."""
+        second = case.sections.second_pantograph
+        if case.sections.pfem.droppers:
+            raise InputError("pfem.droppers: two pantographs on the PFEM run with droppers that do not slacken (a "
+                             "dropper one pantograph slackens is not coupled to the other's); set pfem.droppers = "
+                             "false, or run the pair with slackening in `pantohil fem-sim`", key="pfem.droppers")
+        if second.coupling_compensation:
+            raise InputError("second_pantograph.coupling_compensation: not on the PFEM (its operators are not "
+                             "circulant); set it to false", key="second_pantograph.coupling_compensation")
+        if hardware:
+            raise InputError("second_pantograph: two pantographs on the PFEM run virtually (a pair with one on the rig "
+                             "runs on catenary.model = \"asm\")", key="second_pantograph")
+        try:
+            sample_shift(case.pfem_settings(), second_offset_m(second.spacing_m, second.position))
+        except ValueError as exc:
+            raise InputError(f"second_pantograph.spacing_m: {exc}", key="second_pantograph.spacing_m") from None
+
+    def pair_iteration(self, grid: SpanGrid, parameters: Mapping[str, object], resources: Path, settings,
+                       delay_steps: tuple[int, int], pair):
+        """PfemPairHil on the staged operators and cross operators (models/hil/pfem_pair.py), and the static
+        heights of both points (2, N). The coupling compensation needs circulant operators: refused here."""
+        if pair.compensated:
+            raise ValueError("second_pantograph.coupling_compensation: not on the PFEM (its operators are not "
+                             "circulant); set it to false")
+        ops = self._staged_operators(grid, resources)
+        offset = second_offset_m(pair.spacing_m, pair.position)
+        i12, i21, shift = load_cross_operators(Path(resources) / PAIR_FILE, ops.n, offset)
+        if shift != sample_shift(ops.settings, offset):
+            raise ValueError(f"{PAIR_FILE}: built for a shift of {shift} samples, not this offset's")
+        operators = pair_operators(ops, i12, i21, shift)
+        hil = PfemPairHil(operators, settings, delay_steps, float(parameters["dropper_relaxation"]),
+                          bool(parameters["droppers"]))
+        return hil, operators.z0
 
     def static_compliance_m_N(self, case) -> float:
         """H11(0) of the ASM2 string fitted to the catenary file (Paper A sec. 4), as the run has always set
-        the pantograph: the mean force converges to the uplift force up to the fit's static error."""
+        the pantograph: the mean force converges to the uplift force up to the fit's static error; with a
+        second pantograph the fitted string's H11(0) + H12(0) or H21(0), as for ASM2."""
+        from pantohil.models.catenary.asm.pair import pair_static_compliance_m_N
         from pantohil.models.catenary.asm.string import receptance_direct
 
+        second = case.sections.second_pantograph
+        if second is not None:
+            return pair_static_compliance_m_N(case.catenary, case.speed_m_s, second.spacing_m, second.position)[0]
         return float(receptance_direct(case.catenary, 0.0, case.speed_m_s).real)
 
     def stability_operator(self, case, n_harmonics: int):

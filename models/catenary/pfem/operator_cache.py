@@ -80,3 +80,30 @@ def case_operators(case: Case, progress: bool = True) -> OperatorBuild:
         ops = build_operators(cb, case.pfem_settings(), progress=tick)
     size = save_operators(ops, path, key)
     return OperatorBuild(path, False, time.perf_counter() - t0, ops.info["n_frequencies"], size, key)
+
+
+def case_cross_operators(case: Case, offset_m: float, progress: bool = True) -> Path:
+    """The cross operators of a two-pantograph PFEM case, the second point `offset_m` from the first
+    (offset_operator.py), from the cache or built now (and cached): the path of their file."""
+    import os
+
+    from pantohil.models.catenary.pfem import offset_operator as pfem_offset
+    from pantohil.models.catenary.pfem.pair_operators import save_cross_operators
+
+    h = hashlib.sha256(operator_key(case).encode())
+    h.update(Path(pfem_offset.__file__).read_bytes())
+    h.update(repr(round(float(offset_m), 9)).encode())
+    path = cache_root() / "operators" / f"{h.hexdigest()[:24]}-pair.npz"
+    if path.exists():
+        return path
+    settings = case.pfem_settings()
+    shift = pfem_offset.sample_shift(settings, offset_m)
+    cb = periodic_block(load_definition(case.definition_path), case.samples_per_span)
+    with progress_bar(1, "PFEM pair operators", "pair", progress) as bar:
+        i12, i21 = pfem_offset.pair_cross_operators(cb, settings, offset_m)
+        bar.update(1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(f".{path.stem}.{os.getpid()}.npz")
+    save_cross_operators(partial, i12, i21, offset_m, shift)
+    os.replace(partial, path)
+    return path
