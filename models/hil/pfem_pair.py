@@ -32,6 +32,14 @@ class PfemPairHil:
         self.s = settings
         self.n = self.points[0].n
         self.nd = self.points[0].nd
+        # fixed after construction (not part of an FMU state): the cross operators and each point's own constants,
+        # named on this object so that the FMU's state codec keeps them by reference
+        names = ["cross", "s"]
+        for i, point in enumerate(self.points):
+            for attribute in point.CONSTANT_ATTRIBUTES:
+                setattr(self, f"_point{i}{attribute}", getattr(point, attribute))
+                names.append(f"_point{i}{attribute}")
+        self.CONSTANT_ATTRIBUTES = tuple(names)
 
     @property
     def k(self) -> int:

@@ -58,3 +58,16 @@ def test_roll_back_is_bit_identical_for_every_fmu(built):
         assert "identical True" in proc.stdout and proc.returncode == 0, (name, proc.stdout, proc.stderr)
         if name != "adapter":  # alone, the adapter has no rig: its link is in fault and its outputs hold
             assert "changing True" in proc.stdout, (name, proc.stdout)
+
+
+@pytest.mark.slow
+def test_roll_back_is_bit_identical_for_a_pfem_pair_catenary(tmp_path):
+    """The catenary FMU of two pantographs on the PFEM (models/hil/pfem_pair.py): its state holds both points'
+    iterations, the operators kept by reference."""
+    from conftest import CASES_DIR
+
+    proc = pantohil("build", str(CASES_DIR / "pfem_benchmark_pair_250.toml"), "--out", str(tmp_path))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    proc = subprocess.run([sys.executable, "-c", ROLL_BACK, str(tmp_path / "catenary.fmu")], capture_output=True,
+                          text=True, timeout=900)
+    assert "identical True" in proc.stdout and "changing True" in proc.stdout, (proc.stdout, proc.stderr)
