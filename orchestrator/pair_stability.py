@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from pantohil.models.case import Case, CaseError, load_case
+from pantohil.models.catenary.interface import catenary_model
 from pantohil.models.hil.pair_loop import pair_delay_steps
 from pantohil.models.stability.pair_map import pair_spectral_radius
 
@@ -59,7 +60,7 @@ def run_pair_stability(case: Case, case_path: Path | None, overrides: list[str],
                        relaxation: float | None, overwrite: bool, write_csv) -> dict:
     """The pair's radius per strategy into `out` (stability.csv, summary.json), written whole or not at all;
     `case` loaded from `case_path` (None: the default case) with `overrides`."""
-    if case.model != "asm":
+    if not getattr(catenary_model(case), "pair_stability_map", False):
         raise CaseError(f"catenary.model: the stability map of a pair is built on ASM2's circulant operators, not "
                         f"{case.model!r}", key="catenary.model")
     t0 = time.perf_counter()
