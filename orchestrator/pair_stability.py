@@ -61,8 +61,8 @@ def run_pair_stability(case: Case, case_path: Path | None, overrides: list[str],
     """The pair's radius per strategy into `out` (stability.csv, summary.json), written whole or not at all;
     `case` loaded from `case_path` (None: the default case) with `overrides`."""
     if not getattr(catenary_model(case), "pair_stability_map", False):
-        raise CaseError(f"catenary.model: the stability map of a pair is built on ASM2's circulant operators, not "
-                        f"{case.model!r}", key="catenary.model")
+        raise CaseError(f"catenary.model: {case.model!r} has no stability map of a pair (its operators are not "
+                        "the pair's)", key="catenary.model")
     t0 = time.perf_counter()
     second = case.sections.second_pantograph
     with atomic_output_folder(out, "--out", overwrite) as part:

@@ -38,6 +38,7 @@ class CatenaryModel(Protocol):
     """One kind of periodic catenary model, registered by name in `CATENARIES`; `[catenary] model` chooses."""
 
     structural_keys: tuple[str, ...]  # catenary FMU parameters (besides the grid) its staged resources fix
+    pair_stability_map: bool  # its pair iteration gives the pair's span map (models/stability/pair_map.py)
 
     def check(self, case: Case) -> None:
         """Refuse a case this model cannot run: an InputError naming the key."""

@@ -68,6 +68,17 @@ class PairedHil:
         """Index b of the virtual span the next measured forces belong to."""
         return self.k // self.n
 
+    def dense_operators(self) -> list[list[np.ndarray]]:
+        """I_ij as N x N matrices (rows observed at point i, columns loaded at point j): the stability map's."""
+        return [[self.ops[i][j].dense() for j in range(self.POINTS)] for i in range(self.POINTS)]
+
+    def dense_compensation(self) -> tuple[list, list] | None:
+        """(Q, I Q) as N x N matrices per pair of points, or None without the coupling compensation."""
+        if self.q is None:
+            return None
+        return ([[self.q[i][j].dense() for j in range(self.POINTS)] for i in range(self.POINTS)],
+                [[self.iq[i][j].dense() for j in range(self.POINTS)] for i in range(self.POINTS)])
+
     def ahead(self, count: int, point: int = 0) -> np.ndarray:
         """The commands of the next `count` steps at `point` as the iterate stands (`commands_ahead`): the horizon
         sent to the rig that carries that point's pantograph."""

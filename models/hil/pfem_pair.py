@@ -30,11 +30,12 @@ class PfemPairHil:
                                     droppers) for ops, d in zip((pair.first, pair.second), delay_steps, strict=True))
         self.cross = (np.ascontiguousarray(pair.i21.T), np.ascontiguousarray(pair.i12.T))  # [m]: column m
         self.s = settings
+        self.delays = tuple(int(d) for d in delay_steps)
         self.n = self.points[0].n
         self.nd = self.points[0].nd
         # fixed after construction (not part of an FMU state): the cross operators and each point's own constants,
         # named on this object so that the FMU's state codec keeps them by reference
-        names = ["cross", "s"]
+        names = ["cross", "s", "delays"]
         for i, point in enumerate(self.points):
             for attribute in point.CONSTANT_ATTRIBUTES:
                 setattr(self, f"_point{i}{attribute}", getattr(point, attribute))
@@ -60,6 +61,17 @@ class PfemPairHil:
     def current_correction(self) -> np.ndarray:
         """The first pantograph's droppers' corrections at this step's instant."""
         return self.points[0].current_correction
+
+    def dense_operators(self) -> list[list[np.ndarray]]:
+        """I_11, I_12, I_21, I_22 as N x N matrices (rows observed, columns loaded) as this iteration applies
+        them: the stability map's (models/stability/pair_map.py). With droppers that slacken the map holds
+        while they stay in tension."""
+        own = [np.asarray(p.ops.cc, dtype=float).T for p in self.points]  # ops.cc[m] is column m
+        return [[own[0], self.cross[1].T], [self.cross[0].T, own[1]]]
+
+    def dense_compensation(self) -> None:
+        """None: the PFEM pair has no coupling compensation."""
+        return None
 
     def ahead(self, count: int, point: int = 0) -> np.ndarray:
         """The commands of point `point`'s next `count` steps as the iterate stands."""

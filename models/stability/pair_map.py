@@ -6,7 +6,8 @@ both points, for span-by-span updating also the older block vector, each pantogr
 force in hand at each point and the heights in flight through each point's latency) obeys X^(b+1) = A X^b + B
 (Paper D eq. 13). A is built here as `maps.span_map` builds it for one point: by running the pair's loop on
 every unit state at once (each state variable a row vector over the state's basis), with the heights of
-both points z = z0 + I f_relaxed (models/hil/pair.py), the coupling compensation Q where the iteration uses
+both points z = z0 + I f_relaxed (models/hil/pair.py; on the PFEM, models/hil/pfem_pair.py, its droppers in
+tension, I_ij the operators that pair applies), the coupling compensation Q where the iteration uses
 it, and each point's own delay advance D_i and loop latency. The spectral radius of A decides whether the
 pair converges and is its rate per span; the leading pantograph drives the trailing one through I_21 (or
 I_12) and a little the other way round, which is what a map of one point cannot show.
@@ -14,6 +15,7 @@ I_12) and a little the other way round, which is what a map of one point cannot 
 from __future__ import annotations
 
 from collections import deque
+from typing import Protocol
 
 import numpy as np
 
@@ -29,7 +31,19 @@ from .maps import SpanMap, _layout
 POINTS = PairedHil.POINTS
 
 
-def pair_span_map(hil: PairedHil, pan: LinearPantograph, latency_steps: tuple[int, int]) -> SpanMap:
+class PairIteration(Protocol):
+    """What the map reads of a pair iteration: ASM2's (models/hil/pair.py) or the PFEM's (models/hil/pfem_pair.py)."""
+
+    n: int
+    s: object  # HilSettings: update and relaxation
+    delays: tuple[int, int]
+
+    def dense_operators(self) -> list[list[np.ndarray]]: ...
+
+    def dense_compensation(self) -> tuple[list, list] | None: ...
+
+
+def pair_span_map(hil: PairIteration, pan: LinearPantograph, latency_steps: tuple[int, int]) -> SpanMap:
     """A of X^(b+1) = A X^b for the pair iteration `hil` (its operators, compensation, settings and delay
     advances) with the pantograph `pan` at both points and `latency_steps` per point between a force sample
     and the height it produces (1 = the unavoidable step): Paper D eqs. (A.1)-(A.16) for two points."""
@@ -41,9 +55,8 @@ def pair_span_map(hil: PairedHil, pan: LinearPantograph, latency_steps: tuple[in
     blocks, dim = _layout({"rf": POINTS * n, "z_older": POINTS * n if span else 0, "pantograph": POINTS * pan.size,
                            "force": POINTS, "in_flight_1": lags[0], "in_flight_2": lags[1]})
     X = np.eye(dim)
-    ops = [[hil.ops[i][j].dense() for j in range(POINTS)] for i in range(POINTS)]
-    Q = None if hil.q is None else [[hil.q[i][j].dense() for j in range(POINTS)] for i in range(POINTS)]
-    IQ = None if hil.iq is None else [[hil.iq[i][j].dense() for j in range(POINTS)] for i in range(POINTS)]
+    ops = hil.dense_operators()
+    Q, IQ = hil.dense_compensation() or (None, None)
     rf = X[blocks["rf"]].reshape(POINTS, n, dim).copy()
     z = _heights(ops, rf)
     z_older = X[blocks["z_older"]].reshape(POINTS, n, dim).copy() if span else None

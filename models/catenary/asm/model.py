@@ -58,7 +58,7 @@ def closed_form_reference(case) -> np.ndarray:
 class AsmModel:
     """The ASM2 string (Papers A-B)."""
 
-    pair_stability_map = True  # the pair's span map (models/stability/pair_map.py) needs circulant operators
+    pair_stability_map = True  # the pair's span map (models/stability/pair_map.py)
     structural_keys: tuple[str, ...] = ()  # the operator is built from the parameters at initialisation
 
     def check(self, case) -> None:

@@ -27,7 +27,7 @@ class PfemModel:
     """The periodic finite-element catenary with dropper slackening (Papers C-D)."""
 
     # every [catenary] key: the operators are built from the catenary file the case fits them from
-    pair_stability_map = False  # the pair's span map (models/stability/pair_map.py) needs circulant operators
+    pair_stability_map = True  # the pair's span map (models/stability/pair_map.py) on the dense operators
     structural_keys = ("tension_N", "density_kg_m", "support_stiffness_N_m2", "alpha_1_s", "beta_s")
 
     def check(self, case) -> None:
