@@ -78,11 +78,15 @@ class Problem:
     points: list[SpeedPoint]
 
 
-def case_overrides(request: OptimiseRequest, speed_kmh: float | None, catenary_file: Path) -> list[str]:
-    """The case's overrides with the catenary file as its PFEM catenary, the speed and the 20 Hz band."""
+def case_overrides(request: OptimiseRequest, speed_kmh: float | None, catenary_file: Path,
+                   band: bool = False) -> list[str]:
+    """The case's overrides with the catenary file as its PFEM catenary and the speed; with `band`, the
+    objective's 20 Hz band as the operators' f_max (the linear steady state's force has no harmonic above it:
+    there, truncating the operators is filtering the force). A run with droppers that slacken keeps the case's
+    own f_max and filters its force afterwards, as `pantohil run` and `pantohil fem-sim` do."""
     speed = [] if speed_kmh is None else [f"run.speed_kmh={speed_kmh:g}"]
     return [*request.overrides, "catenary.model=pfem", f"catenary.definition_file={Path(catenary_file).resolve()}",
-            *speed, f"hil.max_frequency_hz={QUALITY_BAND_HZ:g}"]
+            *speed, *([f"hil.max_frequency_hz={QUALITY_BAND_HZ:g}"] if band else [])]
 
 
 def speed_points(request: OptimiseRequest) -> list[SpeedPoint]:
@@ -94,7 +98,7 @@ def speed_points(request: OptimiseRequest) -> list[SpeedPoint]:
         raise InputError(f"--weights: {len(weights)} weights for {len(speeds)} speeds", key="--weights")
     points = []
     for speed, weight in zip(speeds, weights, strict=True):
-        case = load_case(request.case_path, case_overrides(request, speed, request.catenary_file))
+        case = load_case(request.case_path, case_overrides(request, speed, request.catenary_file, band=True))
         w = span_frequencies_rad_s(case.samples_per_span, case.dt_s, case.n_harmonics)
         points.append(SpeedPoint(case.speed_kmh, case.pfem_settings(), receptance(case.pantograph, w),
                                  case.pantograph.uplift_force_N, float(weight)))
@@ -149,7 +153,7 @@ def open_folder(out: Path, request: OptimiseRequest, overwrite: bool) -> None:
 
 def written_case(request: OptimiseRequest, problem: Problem, catenary_name: str) -> dict:
     """The case for the optimised catenary (its TOML as a dict): the input case with its overrides, the PFEM
-    catenary beside it, the first speed, the 20 Hz band, and every file it names by an absolute path."""
+    catenary beside it, the first speed, the case's own f_max, and every file it names by an absolute path."""
     raw, source = load_case_dict(request.case_path)
     raw = apply_overrides(raw, case_overrides(request, problem.points[0].speed_kmh, Path(catenary_name)))
     raw["catenary"]["definition_file"] = catenary_name

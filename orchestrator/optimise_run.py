@@ -14,12 +14,13 @@ from pantohil.models.case import load_case
 from pantohil.models.catenary.fe.definition import build_definition
 from pantohil.models.errors import InputError
 from pantohil.models.hil.rig_loop import run_loop
+from pantohil.models.metrics import lowpass_periodic
 from pantohil.models.progress import progress as progress_bar
 from pantohil.models.storage import write_text_atomic
 
 from .dask_engine import dask_client, worker_count
 from .design_search import JOURNAL, Evaluator, best, design_key, explore, search, starts
-from .optimise import STEP, OptimiseRequest, case_overrides, open_folder, prepare, written_case
+from .optimise import QUALITY_BAND_HZ, STEP, OptimiseRequest, case_overrides, open_folder, prepare, written_case
 from .optimise_report import FIGURE, plot_report, write_history
 from .report import write_json_atomic
 
@@ -34,14 +35,16 @@ def _toml(data: dict) -> str:
 
 
 def nonlinear_check(request: OptimiseRequest, catenary_file: Path, speed_kmh: float) -> dict:
-    """The design in the virtual HIL with dropper slackening at `speed_kmh` (the case's iteration settings): its
-    status and the converged span's statistics."""
+    """The design in the virtual HIL with dropper slackening at `speed_kmh` (the case's iteration settings and
+    f_max): its status and the converged span's statistics in the objective's band, the force low-passed at
+    20 Hz (EN 50367, `lowpass_periodic`, as `pantohil run` and `pantohil fem-sim` report it)."""
     case = load_case(request.case_path, [*case_overrides(request, speed_kmh, catenary_file), "pfem.droppers=true"])
     t0 = time.perf_counter()
     result = run_loop(case)
-    f = result.force_N
+    f = lowpass_periodic(result.force_N, case.dt_s, QUALITY_BAND_HZ)
     return {"status": result.status, "spans": result.spans, "std_N": float(f.std()), "max_N": float(f.max()),
-            "min_N": float(f.min()), "seconds": time.perf_counter() - t0}
+            "min_N": float(f.min()), "f_max_hz": float(case.sections.hil.max_frequency_hz),
+            "seconds": time.perf_counter() - t0}
 
 
 def _search(request: OptimiseRequest, problem, out: Path, scheduler, workers, progress: bool, log) -> tuple:
