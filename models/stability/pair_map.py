@@ -38,9 +38,11 @@ class PairIteration(Protocol):
     s: object  # HilSettings: update and relaxation
     delays: tuple[int, int]
 
-    def dense_operators(self) -> list[list[np.ndarray]]: ...
+    def dense_operators(self) -> list[list[np.ndarray]]:
+        """I_ij as N x N matrices, rows observed at point i, columns loaded at point j."""
 
-    def dense_compensation(self) -> tuple[list, list] | None: ...
+    def dense_compensation(self) -> tuple[list, list] | None:
+        """(Q, I Q) as N x N matrices per pair of points, or None without a coupling compensation."""
 
 
 def pair_span_map(hil: PairIteration, pan: LinearPantograph, latency_steps: tuple[int, int]) -> SpanMap:
