@@ -104,6 +104,13 @@ def load_run(folder: Path) -> tuple[dict, np.ndarray]:
     return read_summary(folder), read_table(folder, STEADY_SPAN)
 
 
+def pair_rate(result, window: int = 20) -> float:
+    """A pair loop's rate per span over its last `window` spans: the decay of the larger of the two points'
+    changes (the pair converges when both do: orchestrator/run_stepping.py)."""
+    change = np.max([[h["change"] for h in history] for history in result.history], axis=0)
+    return float((change[-1] / change[-1 - window]) ** (1 / window))
+
+
 def closed_form_error_25hz(case, force: np.ndarray) -> float:
     """RMS difference of a converged span from the rig-free closed form (Paper A eqs. 38-41), both low-passed
     at 25 Hz (Paper B sec. 5.1), over the closed form's std."""

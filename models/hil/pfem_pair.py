@@ -30,17 +30,21 @@ class PfemPairHil:
                                     droppers) for ops, d in zip((pair.first, pair.second), delay_steps, strict=True))
         self.cross = (np.ascontiguousarray(pair.i21.T), np.ascontiguousarray(pair.i12.T))  # [m]: column m
         self.s = settings
-        self.delays = tuple(int(d) for d in delay_steps)
         self.n = self.points[0].n
         self.nd = self.points[0].nd
         # fixed after construction (not part of an FMU state): the cross operators and each point's own constants,
         # named on this object so that the FMU's state codec keeps them by reference
-        names = ["cross", "s", "delays"]
+        names = ["cross", "s"]
         for i, point in enumerate(self.points):
             for attribute in point.CONSTANT_ATTRIBUTES:
                 setattr(self, f"_point{i}{attribute}", getattr(point, attribute))
                 names.append(f"_point{i}{attribute}")
         self.CONSTANT_ATTRIBUTES = tuple(names)
+
+    @property
+    def delays(self) -> tuple[int, int]:
+        """Each point's delay advance D_i."""
+        return tuple(p.s.delay_steps for p in self.points)
 
     @property
     def k(self) -> int:

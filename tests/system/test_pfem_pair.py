@@ -6,9 +6,8 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
-from conftest import CASES_DIR, load_run, pantohil
+from conftest import CASES_DIR, load_run, pair_rate, pantohil
 
 CASE = CASES_DIR / "pfem_benchmark_pair_250.toml"
 # the map against the run: 150 spans, the rate over the last 40 (two periods of the beat of its two slowest modes,
@@ -48,12 +47,6 @@ def test_the_pfem_pair_with_slackening_droppers_is_refused(tmp_path):
     assert len(lines) == 1 and "pfem.droppers: two pantographs on the PFEM" in lines[0], proc.stderr
 
 
-def _pair_rate(result, window: int) -> float:
-    """The pair's rate per span over its last `window` spans: the decay of the larger of the two points' changes."""
-    change = np.max([[h["change"] for h in history] for history in result.history], axis=0)
-    return float((change[-1] / change[-1 - window]) ** (1 / window))
-
-
 @pytest.mark.slow
 def test_the_stability_map_of_the_pfem_pair_predicts_its_iteration(tmp_path):
     """Issue 33 acceptance 5 on the PFEM: `pantohil stability` of the shipped pair builds the pair's span map on the
@@ -71,7 +64,7 @@ def test_the_stability_map_of_the_pfem_pair_predicts_its_iteration(tmp_path):
     step, span = pair["step"]["spectral_radius"], pair["span"]["spectral_radius"]
     case = load_case(CASE, [f"run.max_spans={MAX_SPANS}", "run.convergence_tol=1e-12"])
     result = run_pair_loop(case)
-    rate = _pair_rate(result, WINDOW)
+    rate = pair_rate(result, WINDOW)
     print(f"\nPFEM pair map: step {step:.4f} (run {rate:.4f} per span), span {span:.4f}")
     assert step < 1 and result.spans == MAX_SPANS
     assert rate == pytest.approx(step, rel=RATE_TOL)

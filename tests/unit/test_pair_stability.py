@@ -1,21 +1,14 @@
 """The stability map of the pair iteration (models/stability/pair_map.py): its spectral radius against the
 in-process pair loop (models/hil/pair_loop.py, equal to the pair's FMUs), a converging setting's rate per span
 and a diverging one's verdict (issue 33, acceptance 5, for the virtual pair)."""
-import numpy as np
 import pytest
+from conftest import pair_rate
 
 from pantohil.models.case import CaseError, load_case
 from pantohil.models.hil.pair_loop import run_pair_loop
 from pantohil.models.stability.pair_map import pair_spectral_radius
 
 PAIR_10HZ = ["hil.max_frequency_hz=10", "second_pantograph.spacing_m=200"]
-
-
-def _pair_rate(result, window: int = 20) -> float:
-    """The pair's rate per span over its last `window` spans: the decay of the larger of the two points'
-    changes (the pair converges when both do: orchestrator/run_stepping.py)."""
-    change = np.max([[h["change"] for h in history] for history in result.history], axis=0)
-    return float((change[-1] / change[-1 - window]) ** (1 / window))
 
 
 @pytest.mark.slow
@@ -25,7 +18,7 @@ def test_the_map_gives_the_rate_of_a_converging_pair():
     result = run_pair_loop(case)
     assert result.spans == 150 and rho < 1
     # 150 spans: the slow mode (rate 0.986) alone is left, about 0.1 % from the map's (issue 33 asks 10 %)
-    assert _pair_rate(result) == pytest.approx(rho, rel=0.01)
+    assert pair_rate(result) == pytest.approx(rho, rel=0.01)
 
 
 @pytest.mark.slow
@@ -50,7 +43,7 @@ def test_the_map_tells_which_update_converges_at_a_spacing():
     rho = pair_spectral_radius(span)
     result = run_pair_loop(span)
     assert rho < 1 and result.spans == 80
-    assert _pair_rate(result, window=60) == pytest.approx(rho, rel=0.01)
+    assert pair_rate(result, window=60) == pytest.approx(rho, rel=0.01)
 
 
 def test_the_map_refuses_a_rig_that_is_not_a_pure_delay():
