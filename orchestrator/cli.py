@@ -808,10 +808,15 @@ def _add_optimise_command(sub) -> None:
                      help="shortest distance between droppers [m] (default 3)")
     opt.add_argument("--max-designs", type=number(2, 100000, integer=True), default=200,
                      help="most designs evaluated (default 200)")
+    opt.add_argument("--max-minutes", type=number(0.1, 10080.0, unit="min"), default=13.5,
+                     help="most minutes of search; the best design found by then is kept and confirmed (default 13.5)")
     opt.add_argument("--explore", type=number(0, 10000, integer=True), default=24,
                      help="designs of a first Sobol sample of the limits, evaluated in parallel (default 24)")
-    opt.add_argument("--starts", type=number(1, 100, integer=True), default=3,
-                     help="descents: from the nominal design and the best designs of the sample (default 3)")
+    opt.add_argument("--starts", type=number(1, 100, integer=True), default=1,
+                     help="descents: from the best designs evaluated by then (default 1)")
+    opt.add_argument("--extremes", default="nominal", metavar="nominal|free",
+                     help="nominal: no design's max above the nominal design's nor its min below (Paper D Table 2's "
+                          "pattern, the default); free: the std alone")
     opt.add_argument("--out", type=Path, required=True, help="folder (the same command continues a folder it started)")
     opt.add_argument("--overwrite", action="store_true", help="start again in a used folder")
     opt.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler (default: a LocalCluster)")
@@ -829,7 +834,8 @@ def _cmd_optimise(args) -> int:
     limits = DesignLimits(args.max_height_deviation, args.min_dropper_length, args.min_dropper_spacing)
     request = OptimiseRequest(catalog.resolve(args.catenary_file, "catenary"), catalog.resolve(args.case, "case"),
                               tuple(args.overrides), args.vary, tuple(args.speeds), tuple(args.weights), limits,
-                              args.max_designs, args.explore, args.starts)
+                              args.max_designs, args.explore, args.starts, args.extremes,
+                              args.max_minutes)
     try:
         s = run_optimise(request, args.out, args.scheduler, args.workers, args.overwrite, not args.quiet,
                          not args.no_confirm)
@@ -841,7 +847,8 @@ def _cmd_optimise(args) -> int:
         n, o = sp["nominal"], sp["optimised"]
         print(f"{sp['speed_kmh']:g} km/h: std {n['std_N']:.2f} -> {o['std_N']:.2f} N "
               f"({-sp['std_reduction_percent']:+.2f} %), max {n['max_N']:.1f} -> {o['max_N']:.1f} N, "
-              f"min {n['min_N']:.1f} -> {o['min_N']:.1f} N")
+              f"min {n['min_N']:.1f} -> {o['min_N']:.1f} N (PFEM steady state, {n['slack_pairs']} -> "
+              f"{o['slack_pairs']} slack dropper instants)")
     c = s["nonlinear_confirmation"]
     if c:
         print(f"virtual HIL with dropper slackening: std {c['nominal']['std_N']:.2f} -> "

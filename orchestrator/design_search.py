@@ -1,19 +1,23 @@
-"""The search of `pantohil optimise`: designs evaluated on Dask (the engine of sweeps: a LocalCluster, or a
-scheduler's address), each evaluation kept in a journal (evaluations.jsonl, one whole line per design) so that an
-interrupted optimisation resumes where it stopped, and a bounded Gauss-Newton search over the design variables.
+"""The search of `pantohil optimise`: designs evaluated on Dask (the engine of sweeps: a LocalCluster, or a scheduler's
+address), each evaluation kept in a journal (evaluations.jsonl, one whole line per design) so that an interrupted
+optimisation resumes where it stopped, and a bounded Gauss-Newton search over the design variables.
 
-The contact force's standard deviation is the norm of the force's deviation from its mean, so the objective is
-a sum of squares: scipy's trust-region least squares (`least_squares`, method "trf", within the bounds) on the
-residuals (f - mean f) sqrt(w_s / (N sum w)) of every speed, with the Jacobian from one-sided differences of
-fixed steps, its columns evaluated in parallel. A design that cannot be built gives large residuals: the trust
-region shrinks away from it. The objective has several minima over the dropper positions (a coarse grid over
-Paper A's stitched catenary at 300 km/h finds minima 4 % apart), so the search first evaluates a scrambled Sobol
-sample of the bounds in one parallel batch and then descends from the best few designs found, the nominal among
-them. It is deterministic (a seeded sample), so a resumed one retraces its steps from the journal.
+The contact force's standard deviation is the norm of the force's deviation from its mean, so the objective is a sum
+of squares: scipy's trust-region least squares (`least_squares`, method "trf", within the bounds) on the residuals
+(f - mean f) sqrt(w_s / (N sum w)) of every speed, with the Jacobian from one-sided differences of fixed steps, its
+columns evaluated in parallel. Bounds on the max and min (the nominal design's, Paper D Table 2's pattern) enter as
+a quadratic penalty on how far a design goes beyond them (a residual per bound and speed), and the design kept is
+the best one evaluated that stays within them. A design that cannot be built gives large residuals: the trust region
+shrinks away from it. The objective has several minima over the dropper positions (a coarse grid over Paper A's
+stitched catenary at 300 km/h finds minima 4 % apart), so the search first evaluates a scrambled Sobol sample of the
+bounds in one parallel batch, descends from the best designs found (the nominal one among them when it ranks), and
+ends with a compass search from the best design within the bounds (`polish`). It is deterministic (a seeded sample),
+so a resumed one retraces its steps from the journal.
 """
 from __future__ import annotations
 
 import json
+import time
 from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,12 +28,28 @@ from scipy.stats import qmc
 
 from pantohil.models.catenary.pfem.design_evaluation import SpeedPoint, evaluate_design
 
+from .dask_engine import tune_worker_allocator
+
 JOURNAL = "evaluations.jsonl"
+BUDGET_SPENT = "the budget (--max-designs or --max-minutes) was spent"
 INFEASIBLE_RESIDUAL_N = 1e3  # per sample: far above any feasible design's deviation
+# 1 N beyond a bound costs as much as 100 N^2 of variance: where the std falls by less than 1 N per N of the bound
+# given up, the descent settles within about 0.1 N of the penalty's bound, which sits EXTREME_MARGIN_N inside the
+# bound itself, so that designs it ends among are within the bounds. (A stiffer penalty traps the descent: the
+# max and min of a sampled force are not smooth in the design.)
+EXTREME_PENALTY = 10.0
+EXTREME_MARGIN_N = 0.1
+
+
+def evaluate_on_worker(raw: dict, points: list[SpeedPoint], min_dropper_length_m: float) -> dict:
+    """`evaluate_design` as a Dask task, its force kept, in a worker whose allocator is tuned for the operator
+    build's large arrays (`tune_worker_allocator`: 11 s a design instead of 17-22 s on the project's VM)."""
+    tune_worker_allocator()
+    return evaluate_design(raw, points, min_dropper_length_m, keep_force=True)
 
 
 class BudgetSpent(Exception):
-    """The number of designs allowed was evaluated."""
+    """The number of designs allowed was evaluated, or the time allowed is up."""
 
 
 def design_key(x: np.ndarray) -> str:
@@ -63,6 +83,7 @@ class Evaluator:
     journal: Path
     max_designs: int
     on_new: object = None  # called with (row) after each new evaluation (progress, log)
+    deadline: float = float("inf")  # time.monotonic() after which no new design is sent
     cache: dict = field(default_factory=dict)
     evaluated: int = 0
 
@@ -70,15 +91,15 @@ class Evaluator:
         self.cache.update(read_journal(self.journal))
 
     def results(self, xs: list[np.ndarray]) -> list[dict]:
-        """The evaluation of each design (journal or Dask); BudgetSpent once max_designs are in the journal."""
+        """The evaluation of each design (journal or Dask); BudgetSpent once max_designs are in the journal or
+        past the deadline."""
         keys = [design_key(x) for x in xs]
         todo = [(k, x) for k, x in dict(zip(keys, xs, strict=True)).items() if k not in self.cache]
-        if todo and len(self.cache) + len(todo) > self.max_designs:
+        if todo and (len(self.cache) + len(todo) > self.max_designs or time.monotonic() > self.deadline):
             raise BudgetSpent
         if todo:
-            futures = self.client.map(evaluate_design, [self.make_raw(x) for _, x in todo],
-                                      [self.points] * len(todo), [self.min_dropper_length_m] * len(todo),
-                                      [True] * len(todo), pure=False)
+            futures = self.client.map(evaluate_on_worker, [self.make_raw(x) for _, x in todo],
+                                      [self.points] * len(todo), [self.min_dropper_length_m] * len(todo), pure=False)
             for (k, x), result in zip(todo, self.client.gather(futures), strict=True):
                 row = {"key": k, "x": [float(v) for v in x], "index": len(self.cache), "result": result}
                 with open(self.journal, "a", encoding="utf-8") as fh:
@@ -90,42 +111,110 @@ class Evaluator:
         return [self.cache[k]["result"] for k in keys]
 
 
-def residuals(result: dict, points: list[SpeedPoint]) -> np.ndarray:
-    """(f - mean f) sqrt(w / (N sum w)) over the speeds: its norm squared is the weighted mean variance."""
+@dataclass(frozen=True)
+class Extremes:
+    """Bounds on each speed's max and min force [N] (the nominal design's); None: no bounds."""
+
+    max_N: tuple[float, ...] | None = None
+    min_N: tuple[float, ...] | None = None
+
+    @classmethod
+    def of(cls, nominal: dict, bounded: bool) -> Extremes:
+        """The nominal result's max and min, or no bounds."""
+        if not bounded:
+            return cls()
+        return cls(tuple(s["max_N"] for s in nominal["speeds"]), tuple(s["min_N"] for s in nominal["speeds"]))
+
+    def excess_N(self, result: dict, margin_N: float = 0.0) -> np.ndarray:
+        """How far each speed's max and min go beyond the bounds drawn `margin_N` inside [N] (0 within them);
+        [] without bounds."""
+        if self.max_N is None:
+            return np.zeros(0)
+        return np.array([[max(0.0, s["max_N"] - hi + margin_N), max(0.0, lo + margin_N - s["min_N"])]
+                         for s, hi, lo in zip(result["speeds"], self.max_N, self.min_N, strict=True)]).ravel()
+
+    def hold(self, result: dict) -> bool:
+        """The design is feasible and its max and min are within the bounds."""
+        return result["feasible"] and not np.any(self.excess_N(result) > 0.0)
+
+
+def residuals(result: dict, points: list[SpeedPoint], extremes: Extremes = Extremes()) -> np.ndarray:
+    """(f - mean f) sqrt(w / (N sum w)) over the speeds: its norm squared is the weighted mean variance; then
+    the penalty of going beyond the extremes' bounds."""
     total = sum(p.weight for p in points)
+    n_extra = 0 if extremes.max_N is None else 2 * len(points)
     if not result["feasible"]:
-        return np.full(sum(p.settings.samples_per_span for p in points), INFEASIBLE_RESIDUAL_N)
+        return np.full(sum(p.settings.samples_per_span for p in points) + n_extra, INFEASIBLE_RESIDUAL_N)
     parts = []
     for p, s in zip(points, result["speeds"], strict=True):
         f = np.asarray(s["force_N"])
         parts.append((f - f.mean()) * np.sqrt(p.weight / (len(f) * total)))
+    weights = np.repeat([np.sqrt(p.weight / total) for p in points], 2) if n_extra else np.zeros(0)
+    parts.append(EXTREME_PENALTY * weights * extremes.excess_N(result, EXTREME_MARGIN_N))
     return np.concatenate(parts)
 
 
+def cost(result: dict, points: list[SpeedPoint], extremes: Extremes) -> float:
+    """What the descent minimises: the weighted mean variance and the extremes' penalty [N^2]."""
+    return float(np.sum(residuals(result, points, extremes) ** 2))
+
+
 def search(evaluator: Evaluator, x0: np.ndarray, bounds: list[tuple[float, float]], step: float,
-           relative_tolerance: float = 1e-3) -> str:
+           extremes: Extremes = Extremes(), relative_tolerance: float = 1e-3) -> str:
     """Bounded least squares from x0 until the cost changes by less than `relative_tolerance` or the budget is
     spent; returns why it stopped."""
     lo, hi = (np.array(b, dtype=float) for b in zip(*bounds, strict=True))
     points = evaluator.points
 
     def fun(x):
-        return residuals(evaluator.results([x])[0], points)
+        return residuals(evaluator.results([x])[0], points, extremes)
 
     def jac(x):
         steps = np.where(x + step <= hi, step, -step)
         trial = [x.copy() for _ in x]
         for i, t in enumerate(trial):
             t[i] += steps[i]
-        r0, *rs = (residuals(r, points) for r in evaluator.results([x, *trial]))
+        r0, *rs = (residuals(r, points, extremes) for r in evaluator.results([x, *trial]))
         return np.column_stack([(r - r0) / h for r, h in zip(rs, steps, strict=True)])
 
     try:
         out = least_squares(fun, np.clip(x0, lo, hi), jac=jac, bounds=(lo, hi), method="trf", x_scale=10 * step,
                             ftol=relative_tolerance, xtol=1e-4, gtol=1e-8)
     except BudgetSpent:
-        return "the design budget (--max-designs) was spent"
+        return BUDGET_SPENT
     return out.message
+
+
+def polish(evaluator: Evaluator, x0: np.ndarray, bounds: list[tuple[float, float]], step: float, smallest: float,
+           extremes: Extremes = Extremes()) -> str:
+    """A compass search from x0 over the designs within the extremes' bounds: each poll evaluates x +- h along
+    every variable in one parallel batch and moves to the best design that lowers the objective, or halves h;
+    it ends when h falls below `smallest` or the budget is spent. It follows a bound the descent's penalty
+    cannot (the max and min of a sampled force jump as the design moves), and its first steps are long enough
+    to leave a local minimum the descent ended in."""
+    lo, hi = (np.array(b, dtype=float) for b in zip(*bounds, strict=True))
+    x = np.asarray(x0, dtype=float)
+    fx = evaluator.results([x])[0]
+    fx = fx["objective_N"] if extremes.hold(fx) else np.inf
+    h = step
+    try:
+        while h >= smallest:
+            trial = []
+            for i in range(len(x)):
+                for sign in (1.0, -1.0):
+                    t = x.copy()
+                    t[i] = np.clip(t[i] + sign * h, lo[i], hi[i])
+                    if not np.allclose(t, x) and not any(np.allclose(t, u) for u in trial):
+                        trial.append(t)
+            scored = [(r["objective_N"], i) for i, r in enumerate(evaluator.results(trial)) if extremes.hold(r)]
+            if scored and min(scored)[0] < fx:
+                fx, i = min(scored)
+                x = trial[i]
+            else:
+                h /= 2
+    except BudgetSpent:
+        return BUDGET_SPENT
+    return f"the compass search's step fell below {smallest:g} m"
 
 
 def explore(evaluator: Evaluator, bounds: list[tuple[float, float]], count: int, seed: int = 34) -> None:
@@ -138,12 +227,12 @@ def explore(evaluator: Evaluator, bounds: list[tuple[float, float]], count: int,
         evaluator.results(list(qmc.scale(sample, lo, hi)))
 
 
-def starts(evaluator: Evaluator, x0: np.ndarray, count: int) -> list[np.ndarray]:
-    """The nominal design and the best feasible ones evaluated so far, at most `count` in all (fewer where the
-    sample found no other design that can be built: heights far from the nominal ones compress droppers)."""
+def starts(evaluator: Evaluator, count: int, extremes: Extremes = Extremes()) -> list[np.ndarray]:
+    """The `count` feasible designs of the lowest descent cost evaluated so far (the nominal one among them when
+    it ranks), best first: the descents' starting points."""
     rows = sorted((r for r in evaluator.cache.values() if r["result"]["feasible"]),
-                  key=lambda r: r["result"]["objective_N"])
-    out = [np.asarray(x0, dtype=float)]
+                  key=lambda r: cost(r["result"], evaluator.points, extremes))
+    out: list[np.ndarray] = []
     for r in rows:
         if len(out) >= count:
             break
@@ -152,7 +241,8 @@ def starts(evaluator: Evaluator, x0: np.ndarray, count: int) -> list[np.ndarray]
     return out
 
 
-def best(evaluator: Evaluator) -> dict | None:
-    """The feasible design of the lowest objective among all evaluated (None: none was feasible)."""
-    rows = [r for r in evaluator.cache.values() if r["result"]["feasible"]]
+def best(evaluator: Evaluator, extremes: Extremes = Extremes()) -> dict | None:
+    """The design of the lowest objective among all evaluated that is feasible and within the extremes' bounds
+    (None: none is)."""
+    rows = [r for r in evaluator.cache.values() if extremes.hold(r["result"])]
     return min(rows, key=lambda r: r["result"]["objective_N"]) if rows else None

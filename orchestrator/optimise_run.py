@@ -1,6 +1,7 @@
-"""The run of `pantohil optimise` (orchestrator/optimise.py checks its request): the search on Dask, the nonlinear
-confirmation of the nominal and the optimised design in the virtual HIL with dropper slackening, and the files:
-optimised_catenary.toml, optimised_case.toml, history.csv, optimise.png and summary.json (written last)."""
+"""The run of `pantohil optimise` (orchestrator/optimise.py checks its request): the search on Dask, the
+confirmation of the nominal and the optimised design in the virtual HIL with dropper slackening (both on Dask),
+and the files: optimised_catenary.toml, optimised_case.toml, history.csv, optimise.png and summary.json (written
+last)."""
 from __future__ import annotations
 
 import time
@@ -18,13 +19,17 @@ from pantohil.models.metrics import lowpass_periodic
 from pantohil.models.progress import progress as progress_bar
 from pantohil.models.storage import write_text_atomic
 
-from .dask_engine import dask_client, worker_count
-from .design_search import JOURNAL, Evaluator, best, design_key, explore, search, starts
-from .optimise import QUALITY_BAND_HZ, STEP, OptimiseRequest, case_overrides, open_folder, prepare, written_case
+from .dask_engine import dask_client, tune_worker_allocator, worker_count
+from pantohil.models.catenary.pfem.design_evaluation import QUALITY_BAND_HZ
+
+from .design_search import (BUDGET_SPENT, JOURNAL, Evaluator, Extremes, best, design_key, explore, polish, search,
+                            starts)
+from .optimise import STEP, OptimiseRequest, case_overrides, open_folder, prepare, written_case
 from .optimise_report import FIGURE, plot_report, write_history
 from .report import write_json_atomic
 
 CATENARY_OUT = "optimised_catenary.toml"
+POLISH_STEPS = 10  # the compass search's first step, in finite-difference steps (0.5 m for positions, 10 mm heights)
 CASE_OUT = "optimised_case.toml"
 
 
@@ -47,11 +52,16 @@ def nonlinear_check(request: OptimiseRequest, catenary_file: Path, speed_kmh: fl
             "seconds": time.perf_counter() - t0}
 
 
-def _search(request: OptimiseRequest, problem, out: Path, scheduler, workers, progress: bool, log) -> tuple:
-    """The Dask search: (evaluator, why it stopped, the workers it had)."""
+def confirm_on_worker(request: OptimiseRequest, catenary_file: Path, speed_kmh: float) -> dict:
+    """`nonlinear_check` as a Dask task, in a worker tuned for the operator build (`tune_worker_allocator`)."""
+    tune_worker_allocator()
+    return nonlinear_check(request, catenary_file, speed_kmh)
+
+
+def _search(request: OptimiseRequest, problem, out: Path, client, progress: bool, log, deadline: float) -> tuple:
+    """The Dask search until `deadline` (time.monotonic()): (evaluator, the extremes' bounds, why it stopped)."""
     make_raw = partial(problem.space.apply, problem.raw, problem.cat)
-    with dask_client(scheduler, workers) as client, \
-            progress_bar(request.max_designs, f"optimise {request.vary}", "design", progress, leave=True) as bar:
+    with progress_bar(request.max_designs, f"optimise {request.vary}", "design", progress, leave=True) as bar:
         lowest = [np.inf]
 
         def on_new(row):
@@ -61,7 +71,7 @@ def _search(request: OptimiseRequest, problem, out: Path, scheduler, workers, pr
                 bar.set_postfix(best=f"{lowest[0]:.3f} N")
 
         evaluator = Evaluator(client, make_raw, problem.points, request.limits.min_dropper_length_m,
-                              out / JOURNAL, request.max_designs, on_new)
+                              out / JOURNAL, request.max_designs, on_new, deadline)
         if evaluator.cache:
             bar.update(len(evaluator.cache))
             log(f"continuing: {len(evaluator.cache)} designs already in {out / JOURNAL}")
@@ -69,42 +79,52 @@ def _search(request: OptimiseRequest, problem, out: Path, scheduler, workers, pr
         if not nominal["feasible"]:
             raise InputError(f"{request.catenary_file}: the nominal design cannot be evaluated ({nominal['reason']})",
                              key="catenary")
+        extremes = Extremes.of(nominal, request.extremes == "nominal")
         explore(evaluator, problem.bounds, request.explore)
         why = []
-        for x in starts(evaluator, problem.x0, request.starts):
-            why.append(search(evaluator, x, problem.bounds, STEP[request.vary]).rstrip("."))
-            if why[-1].startswith("the design budget"):
+        for x in starts(evaluator, request.starts, extremes):
+            why.append(search(evaluator, x, problem.bounds, STEP[request.vary], extremes).rstrip("."))
+            if why[-1] == BUDGET_SPENT:
                 break
-        return evaluator, f"descents {len(why)}: " + "; ".join(dict.fromkeys(why)), worker_count(client)
+        top = best(evaluator, extremes)
+        if why[-1] != BUDGET_SPENT and top is not None:
+            why.append(polish(evaluator, np.array(top["x"]), problem.bounds, POLISH_STEPS * STEP[request.vary],
+                              STEP[request.vary] / 2, extremes))
+        return evaluator, extremes, "; ".join(dict.fromkeys(why))
 
 
 def run_optimise(request: OptimiseRequest, out: Path, scheduler: str | None = None, workers: int | None = None,
                  overwrite: bool = False, progress: bool = True, confirm: bool = True, log=print) -> dict:
     """`pantohil optimise`: search, confirm, write; the summary (also summary.json)."""
     t0 = time.perf_counter()
+    deadline = time.monotonic() + 60.0 * request.max_minutes
     problem = prepare(request)
     out = Path(out)
     open_folder(out, request, overwrite)
-    evaluator, why, n_workers = _search(request, problem, out, scheduler, workers, progress, log)
-    t_search = time.perf_counter() - t0
-    top = best(evaluator)
-    nominal = evaluator.cache[design_key(problem.x0)]["result"]
-    x_best = np.array(top["x"])
-    optimised_raw = problem.space.apply(problem.raw, problem.cat, x_best)
-    write_text_atomic(out / CATENARY_OUT, _toml(optimised_raw))
-    write_text_atomic(out / CASE_OUT, _toml(written_case(request, problem, CATENARY_OUT)))
-    load_case(out / CASE_OUT)  # the case written loads as `pantohil run` will load it
-    rows = list(evaluator.cache.values())
-    names = problem.space.variables(problem.cat)
-    write_history(out / "history.csv", rows, names)
-    plot_report(out / FIGURE, problem.cat, build_definition(optimised_raw), rows, nominal, top["result"])
-    checks = {}
-    if confirm:
-        speed = problem.points[0].speed_kmh
-        log(f"nonlinear confirmation at {speed:g} km/h (virtual HIL, droppers slacken)")
-        checks = {"nominal": nonlinear_check(request, Path(request.catenary_file), speed),
-                  "optimised": nonlinear_check(request, out / CATENARY_OUT, speed)}
+    with dask_client(scheduler, workers) as client:
+        evaluator, extremes, why = _search(request, problem, out, client, progress, log, deadline)
+        t_search = time.perf_counter() - t0
+        top = best(evaluator, extremes)
+        nominal = evaluator.cache[design_key(problem.x0)]["result"]
+        x_best = np.array(top["x"])
+        optimised_raw = problem.space.apply(problem.raw, problem.cat, x_best)
+        write_text_atomic(out / CATENARY_OUT, _toml(optimised_raw))
+        write_text_atomic(out / CASE_OUT, _toml(written_case(request, problem, CATENARY_OUT)))
+        load_case(out / CASE_OUT)  # the case written loads as `pantohil run` will load it
+        rows = list(evaluator.cache.values())
+        names = problem.space.variables(problem.cat)
+        write_history(out / "history.csv", rows, names)
+        plot_report(out / FIGURE, problem.cat, build_definition(optimised_raw), rows, nominal, top["result"])
+        checks = {}
+        if confirm:
+            speed = problem.points[0].speed_kmh
+            log(f"confirmation at {speed:g} km/h (virtual HIL, droppers slacken)")
+            files = {"nominal": Path(request.catenary_file), "optimised": out / CATENARY_OUT}
+            futures = client.map(confirm_on_worker, [request] * 2, list(files.values()), [speed] * 2, pure=False)
+            checks = dict(zip(files, client.gather(futures), strict=True))
+        n_workers = worker_count(client)
     summary = _summary(request, problem, names, nominal, top, why, evaluator, n_workers, t_search, checks, t0)
+    summary["extremes"] = {"bounded_by": request.extremes, "max_N": extremes.max_N, "min_N": extremes.min_N}
     write_json_atomic(out / "summary.json", summary)
     return summary
 
@@ -120,18 +140,22 @@ def _summary(request, problem, names, nominal, top, why, evaluator, n_workers, t
     stats = ("std_N", "max_N", "min_N")
     speeds = []
     for n, o in zip(nominal["speeds"], top["result"]["speeds"], strict=True):
-        speeds.append({"speed_kmh": n["speed_kmh"], "nominal": {k: n[k] for k in stats},
-                       "optimised": {k: o[k] for k in stats}, **_reduction(n, o)})
+        speeds.append({"speed_kmh": n["speed_kmh"], "nominal": {k: n[k] for k in (*stats, "slack_pairs")},
+                       "optimised": {k: o[k] for k in (*stats, "slack_pairs")}, **_reduction(n, o)})
     nonlinear = {k: v for k, v in checks.items()}
     if checks:
         nonlinear.update(_reduction(checks["nominal"], checks["optimised"]))
+        nonlinear["hil_against_steady_state_percent"] = {
+            k: 100.0 * (checks[k]["std_N"] / r["speeds"][0]["std_N"] - 1.0)
+            for k, r in (("nominal", nominal), ("optimised", top["result"]))}
     return {"catenary_file": str(request.catenary_file), "case": str(request.case_path), "vary": request.vary,
             "variables": names, "nominal_x": [float(v) for v in problem.x0], "optimised_x": top["x"],
             "bounds": problem.bounds, "limits": asdict(request.limits),
-            "objective": "std of the contact force, 0-20 Hz (over several speeds: root of the weighted mean variance)",
+            "objective": "std of the contact force, 0-20 Hz, of the PFEM steady state with dropper slackening (over "
+                         "several speeds: root of the weighted mean variance)",
             "nominal_objective_N": nominal["objective_N"], "optimised_objective_N": top["result"]["objective_N"],
             "speeds": speeds, "nonlinear_confirmation": nonlinear, "stopped": why,
             "designs": {"in_journal": len(evaluator.cache), "evaluated_now": evaluator.evaluated,
-                        "max_designs": request.max_designs},
+                        "max_designs": request.max_designs, "max_minutes": request.max_minutes},
             "workers": n_workers, "timing": {"search_s": t_search, "wall_s": time.perf_counter() - t0},
             "files": [CATENARY_OUT, CASE_OUT, "history.csv", FIGURE, JOURNAL]}

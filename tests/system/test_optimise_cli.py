@@ -42,12 +42,13 @@ def test_a_catenary_file_the_builder_refuses_is_named(tmp_path):
 
 @pytest.mark.slow
 def test_the_heights_design_lowers_the_std_as_paper_d_table_2_and_a_folder_continues(tmp_path):
-    """Issue 34 acceptance 1 (heights): the std of the PFEM steady state at 300 km/h falls by at least the
-    11.24 % Paper D measured with the DSA-380 for OC1 (19.5 % found), the max falls and the min rises; the
-    optimised files load as a case. Run again into the same folder, it evaluates nothing new."""
+    """Issue 34 acceptance 1 (heights): the std of the PFEM steady state with dropper slackening at 300 km/h
+    falls by at least the 11.24 % Paper D measured with the DSA-380 for OC1 (a descent from the nominal design,
+    12 designs: 23.21 % measured), the max falls and the min rises (the default bounds); the optimised files load
+    as a case. Run again into the same folder, it evaluates nothing new."""
     out = tmp_path / "heights"
-    args = ("optimise", STITCHED, *AT_300, "--vary", "heights", "--max-designs", "30", "--no-confirm",
-            "--out", str(out), "--quiet")
+    args = ("optimise", STITCHED, *AT_300, "--vary", "heights", "--explore", "0", "--max-designs", "12",
+            "--no-confirm", "--out", str(out), "--quiet")
     done = pantohil(*args, timeout=1800)
     assert done.returncode == 0, done.stderr
     s = json.loads((out / "summary.json").read_text())
@@ -55,7 +56,7 @@ def test_the_heights_design_lowers_the_std_as_paper_d_table_2_and_a_folder_conti
     assert speed["std_reduction_percent"] >= 11.24
     assert speed["max_change_N"] < 0 < speed["min_change_N"]
     with open(out / "history.csv", encoding="utf-8") as fh:
-        assert len(list(csv.DictReader(fh))) == s["designs"]["in_journal"] <= 30
+        assert len(list(csv.DictReader(fh))) == s["designs"]["in_journal"] <= 12
     case = load_case(out / "optimised_case.toml")
     assert case.model == "pfem" and case.speed_kmh == pytest.approx(300.0)
     assert (out / "optimise.png").stat().st_size > 0
