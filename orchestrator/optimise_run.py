@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from pantohil.models.case import load_case
+from pantohil.models.catenary.pfem.design_evaluation import QUALITY_BAND_HZ
 from pantohil.models.catenary.fe.definition import build_definition
 from pantohil.models.errors import InputError
 from pantohil.models.hil.rig_loop import run_loop
@@ -20,8 +21,6 @@ from pantohil.models.progress import progress as progress_bar
 from pantohil.models.storage import write_text_atomic
 
 from .dask_engine import dask_client, tune_worker_allocator, worker_count
-from pantohil.models.catenary.pfem.design_evaluation import QUALITY_BAND_HZ
-
 from .design_search import (BUDGET_SPENT, JOURNAL, Evaluator, Extremes, best, design_key, explore, polish, search,
                             starts)
 from .optimise import STEP, OptimiseRequest, case_overrides, open_folder, prepare, written_case
@@ -29,8 +28,8 @@ from .optimise_report import FIGURE, plot_report, write_history
 from .report import write_json_atomic
 
 CATENARY_OUT = "optimised_catenary.toml"
-POLISH_STEPS = 10  # the compass search's first step, in finite-difference steps (0.5 m for positions, 10 mm heights)
 CASE_OUT = "optimised_case.toml"
+POLISH_STEPS = 10  # the compass search's first step, in finite-difference steps (0.5 m for positions, 10 mm heights)
 
 
 def _toml(data: dict) -> str:
