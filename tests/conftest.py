@@ -1,10 +1,13 @@
 """Shared fixtures: a run of the default case (made once per session) and helpers."""
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -77,7 +80,6 @@ def plain_install(venv: Path) -> Path:
 
 def run_main(argv: list[str]) -> tuple[int, str]:
     """The CLI's main in this process (faster than a child for many refusals): its exit code and stderr."""
-    import contextlib
     import io
 
     from pantohil.orchestrator.cli import main
@@ -122,6 +124,40 @@ def closed_form_error_25hz(case, force: np.ndarray) -> float:
     ref = ss.force_series(case.samples_per_span)
     f25, r25 = lowpass_periodic(force, case.dt_s, 25.0), lowpass_periodic(ref, case.dt_s, 25.0)
     return float(np.sqrt(np.mean(((f25 - f25.mean()) - (r25 - r25.mean())) ** 2)) / np.std(r25))
+
+
+@contextlib.contextmanager
+def _machine_share(item):
+    """A test marked `realtime` runs with the machine to itself: the suite runs on several workers
+    (`-n 2`), and a rig-paced run whose master shares the cores with another test's long run falls behind
+    the rig's clock (its forces are then held out and the run ends link_lost), which says nothing of the
+    link. Every other test holds a shared lock while it runs (its fixtures' set-up and tear-down
+    included), a realtime test the exclusive one; a turnstile held by a waiting realtime test stops new
+    shared holders, so that it is not starved. Waiting is on the locks (events), never on a time."""
+    uid = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+    if uid is None:  # one process: nothing runs beside the test
+        yield
+        return
+    base = Path(tempfile.gettempdir()) / f"pantohil-tests-{uid}"
+    exclusive = item.get_closest_marker("realtime") is not None
+    with open(f"{base}.turnstile", "a") as gate, open(f"{base}.lock", "a") as lock:
+        fcntl.flock(gate, fcntl.LOCK_EX)
+        if not exclusive:
+            fcntl.flock(gate, fcntl.LOCK_UN)
+        fcntl.flock(lock, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        if exclusive:
+            fcntl.flock(gate, fcntl.LOCK_UN)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """Each test under the machine share (`_machine_share`)."""
+    with _machine_share(item):
+        yield
 
 
 @pytest.fixture(scope="session", autouse=True)
