@@ -153,6 +153,14 @@ def _machine_share(item):
             fcntl.flock(lock, fcntl.LOCK_UN)
 
 
+def pytest_collection_modifyitems(items):
+    """The realtime tests first, then the slow ones, then the rest, each group in its order. The workers run
+    the realtime tests one after the other at the start, each waiting on the other's realtime test only,
+    not on a long test that holds the machine; the long tests then start early, so that the suite does not
+    end with one worker on a long test and the other idle."""
+    items.sort(key=lambda item: (item.get_closest_marker("realtime") is None, item.get_closest_marker("slow") is None))
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item, nextitem):
     """Each test under the machine share (`_machine_share`)."""

@@ -13,6 +13,7 @@ import numpy as np
 
 from pantohil.models.hil.loop import UPDATES, HilSettings, commands_ahead, hold
 from pantohil.models.catenary.pfem.operator_data import PfemOperators
+from pantohil.models.catenary.pfem.steady_state import irfft_rows
 from pantohil.models.catenary.receptance import reduce_harmonics
 
 
@@ -50,12 +51,7 @@ class PfemHil:
         self.elongation = np.zeros((ops.n_droppers, 2 * jd))
         self._dc = np.concatenate([ops.dc.real, ops.dc.imag], axis=-1)
         self._dd = np.concatenate([ops.dd.real, ops.dd.imag], axis=-1)
-        a = np.full(jd, 2.0)
-        a[0] = 1.0
-        if n % 2 == 0 and jd == n // 2 + 1:
-            a[-1] = 1.0
-        theta = 2 * np.pi * np.outer(np.arange(n), np.arange(jd)) / n
-        self._basis = np.concatenate([a * np.cos(theta), -a * np.sin(theta)], axis=1) / n  # irfft row i
+        self._basis = irfft_rows(n, jd)  # irfft row i
         self.f0 = ops.dropper_tension_N
         self.kd = ops.dropper_stiffness_N_m
         self.win = ops.window_start

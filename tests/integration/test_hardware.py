@@ -1,5 +1,6 @@
 """The hardware path: adapter FMU <-UDP-> rig emulator on loopback, real time, faults,
 fuzzing, link loss and actuator limits."""
+import functools
 import json
 import math
 import struct
@@ -261,9 +262,9 @@ def test_commands_never_exceed_the_actuator_limits(tmp_path):
     assert stats["max_abs_acceleration_m_s2"] <= 2.0 * (1 + 1e-6)
 
 
-def _hardware_run(emu: Emulator, out: Path) -> subprocess.CompletedProcess:
+def _hardware_run(emu: Emulator, out: Path, *extra: str) -> subprocess.CompletedProcess:
     # two runs against the lockstep emulator give the same span to the last bit
-    return pantohil("run", "--hardware", emu.address, "--out", str(out), "--quiet", "--set", PATIENT_LINK)
+    return pantohil("run", "--hardware", emu.address, "--out", str(out), "--quiet", "--set", PATIENT_LINK, *extra)
 
 
 class Intruder:
@@ -295,17 +296,21 @@ class Intruder:
             time.sleep(0.001)  # a steady stream, not a flood: the point is who may move the actuator
 
 
+FEW_SPANS = ("--set", "run.max_spans=8")  # the intruder's datagrams fall on every span of the run
+
+
 @pytest.mark.slow
 def test_a_second_client_cannot_move_or_reset_the_rig(tmp_path):
     # datagrams of another client during a hardware session are refused and
     # counted, the actuator never moves for them, and the run's span equals an undisturbed run's
     emu = Emulator(tmp_path)
     try:
-        undisturbed = _hardware_run(emu, tmp_path / "undisturbed")
+        undisturbed = _hardware_run(emu, tmp_path / "undisturbed", *FEW_SPANS)
         emu.wait_for("session 1 closed")
         intruder = Intruder(emu.port)
         result = {}
-        run = threading.Thread(target=lambda: result.update(proc=_hardware_run(emu, tmp_path / "disturbed")))
+        disturbed_run = functools.partial(_hardware_run, emu, tmp_path / "disturbed", *FEW_SPANS)
+        run = threading.Thread(target=lambda: result.update(proc=disturbed_run()))
         run.start()
         emu.wait_for("session 2 opened")
         intruder.thread.start()
@@ -315,7 +320,8 @@ def test_a_second_client_cannot_move_or_reset_the_rig(tmp_path):
         run.join()
     finally:
         stats = emu.stop()
-    assert undisturbed.returncode == 0 and result["proc"].returncode == 0, result["proc"].stderr
+    # exit 1: the runs ended at the span limit, as planned
+    assert undisturbed.returncode == 1 and result["proc"].returncode == 1, result["proc"].stderr
     quiet, disturbed = stats["session_log"][0], stats["session_log"][1]
     assert quiet["end"] == disturbed["end"] == "bye"  # the intruder's BYEs ended nothing
     assert disturbed["foreign"] > 100 and quiet["foreign"] == 0

@@ -22,7 +22,7 @@ CASES = [
     ("paper_b_mass_300", ['hil.rig_compensation="delay"']),
     ("paper_b_pantograph_300", []),
     ("paper_b_pantograph_250", []),
-    ("paper_b_pantograph_200", []),
+    ("paper_b_pantograph_200", ["run.max_spans=40"]),  # converges slowly: the first 40 spans, then the limit
     ("paper_d_mass_250", []),
     ("paper_b_mass_300", [*TO_THE_END, "run.max_spans=60"]),
     ("paper_b_pantograph_300", [*TO_THE_END, "run.max_spans=70"]),

@@ -53,3 +53,19 @@ def test_the_pfem_solve_is_the_fixed_point_of_the_virtual_hil():
 def test_the_solve_refuses_an_operator_of_another_size():
     with pytest.raises(ValueError, match="cc must be 8 x 8"):
         linear_steady_state(np.zeros((7, 7)), np.zeros(8), np.ones(3, dtype=complex), 1e-3, 100.0)
+
+
+@pytest.mark.parametrize("n,jd", [(12, 7), (12, 4), (11, 6), (11, 3)])
+def test_the_window_rows_are_numpys_inverse_real_fft(n, jd):
+    """`irfft_rows` (the dropper windows' instants from their harmonics, shared by the HIL and the steady state
+    with slack droppers) against np.fft.irfft of the same harmonics, the ones above jd - 1 zero."""
+    from pantohil.models.catenary.pfem.steady_state import irfft_rows
+
+    rng = np.random.default_rng(n * jd)
+    harmonics = np.zeros(n // 2 + 1, dtype=complex)
+    harmonics[:jd] = rng.normal(size=jd) + 1j * rng.normal(size=jd)
+    harmonics[0] = harmonics[0].real
+    if n % 2 == 0:
+        harmonics[-1] = harmonics[-1].real
+    rows = irfft_rows(n, jd) @ np.concatenate([harmonics[:jd].real, harmonics[:jd].imag])
+    assert np.allclose(rows, np.fft.irfft(harmonics, n), rtol=0, atol=1e-12)

@@ -24,7 +24,7 @@ import numpy as np
 from pantohil.models.errors import PantohilError
 
 from .operator_data import PfemOperators
-from .steady_state import LinearSteadyState, harmonic_basis, receptance_block
+from .steady_state import LinearSteadyState, harmonic_basis, irfft_rows, receptance_block
 
 MAX_ACTIVE_SET_ITERATIONS = 60
 
@@ -45,12 +45,9 @@ class SlackSteadyState(LinearSteadyState):
 
 def _window_basis(n: int, jd: int) -> np.ndarray:
     """Row i: the complex weights that give a real sequence's value at index i from its rfft harmonics 0..jd-1
-    (np.fft.irfft's, harmonics above jd-1 zero)."""
-    a = np.full(jd, 2.0)
-    a[0] = 1.0
-    if n % 2 == 0 and jd == n // 2 + 1:
-        a[-1] = 1.0
-    return a * np.exp(2j * np.pi * np.outer(np.arange(n), np.arange(jd)) / n) / n
+    (`irfft_rows`, the HIL's own, as one complex row)."""
+    rows = irfft_rows(n, jd)
+    return rows[:, :jd] - 1j * rows[:, jd:]
 
 
 def _harmonic_balance(ops: PfemOperators, pantograph_receptance_m_N: np.ndarray, mean_force_N: float) -> tuple:

@@ -51,6 +51,18 @@ def harmonic_basis(n: int, n_harmonics: int) -> np.ndarray:
     return np.hstack([np.cos(theta), np.sin(theta)])
 
 
+def irfft_rows(n: int, n_harmonics: int) -> np.ndarray:
+    """Row i: the weights that give a real sequence's value at index i from the real parts, then the
+    imaginary parts, of its rfft harmonics 0..n_harmonics-1 (np.fft.irfft's, the harmonics above zero):
+    a dropper window's elongation at an instant from its harmonics (Paper C eqs. 35-40)."""
+    a = np.full(n_harmonics, 2.0)
+    a[0] = 1.0
+    if n % 2 == 0 and n_harmonics == n // 2 + 1:
+        a[-1] = 1.0
+    theta = 2 * np.pi * np.outer(np.arange(n), np.arange(n_harmonics)) / n
+    return np.concatenate([a * np.cos(theta), -a * np.sin(theta)], axis=1) / n
+
+
 def receptance_block(h: np.ndarray) -> np.ndarray:
     """H_p acting on the coefficients (a, b) of a cos + b sin at each harmonic: a cos + b sin ->
     (Re H a + Im H b) cos + (Re H b - Im H a) sin, as one 2 (N_h - 1) square matrix."""
