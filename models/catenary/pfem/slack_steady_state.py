@@ -24,7 +24,7 @@ import numpy as np
 from pantohil.models.errors import PantohilError
 
 from .operator_data import PfemOperators
-from .steady_state import LinearSteadyState, harmonic_basis, irfft_rows, receptance_block
+from .steady_state import LinearSteadyState, harmonic_balance, irfft_rows
 
 MAX_ACTIVE_SET_ITERATIONS = 60
 
@@ -50,22 +50,12 @@ def _window_basis(n: int, jd: int) -> np.ndarray:
     return rows[:, :jd] - 1j * rows[:, jd:]
 
 
-def _harmonic_balance(ops: PfemOperators, pantograph_receptance_m_N: np.ndarray, mean_force_N: float) -> tuple:
-    """The linear solve's harmonic basis, projection, system and right-hand side (steady_state.py)."""
-    n = ops.n
-    basis = harmonic_basis(n, len(pantograph_receptance_m_N) + 1)
-    project = basis.T * (2.0 / n)
-    system = receptance_block(np.asarray(pantograph_receptance_m_N)) + project @ (ops.cc.T @ basis)
-    rhs_force = -project @ (np.asarray(ops.z0, dtype=float) + ops.cc.T @ np.full(n, mean_force_N))
-    return basis, project, system, rhs_force
-
-
 def slack_steady_state(ops: PfemOperators, pantograph_receptance_m_N: np.ndarray, mean_force_N: float,
                        tolerance_N: float = 1e-9) -> SlackSteadyState:
     """The steady contact force over one span with droppers that slacken (module docstring); `ops` built with
     the droppers' windows, the receptance at the span's harmonics 1..N_h-1 as for `linear_steady_state`."""
     n, nd = ops.n, ops.n_droppers
-    basis, project, system, rhs_force = _harmonic_balance(ops, pantograph_receptance_m_N, mean_force_N)
+    basis, project, system, rhs_force = harmonic_balance(ops.cc, ops.z0, pantograph_receptance_m_N, mean_force_N)
     f0, kd, win = ops.dropper_tension_N, ops.dropper_stiffness_N_m, np.asarray(ops.window_start)
     wb = _window_basis(n, ops.settings.n_harmonics_dropper)
     phase_rows = (np.arange(n)[None, :] - win[:, None]) % n  # [dropper, phase] -> window index

@@ -76,16 +76,25 @@ def linear_steady_state(cc: np.ndarray, z0_m: np.ndarray, pantograph_receptance_
     per unit force at sample m), `z0_m` the static wire height at the contact samples, the pantograph's contact-
     point receptance at the span's harmonics 1..N_h-1 (w_k = 2 pi k / (N dt)), and the mean force."""
     n = len(z0_m)
-    n_harmonics = len(pantograph_receptance_m_N) + 1
     if cc.shape != (n, n):
         raise ValueError(f"cc must be {n} x {n} (got {cc.shape})")
-    basis = harmonic_basis(n, n_harmonics)
+    basis, _, system, rhs = harmonic_balance(cc, z0_m, pantograph_receptance_m_N, mean_force_N)
+    coefficients = np.linalg.solve(system, rhs)
+    return LinearSteadyState(mean_force_N + basis @ coefficients, dt_s)
+
+
+def harmonic_balance(cc: np.ndarray, z0_m: np.ndarray, pantograph_receptance_m_N: np.ndarray,
+                     mean_force_N: float) -> tuple:
+    """The harmonic balance of the linear solve (Paper A eqs. 38-39 with the PFEM's operator): the basis of
+    harmonics 1..N_h-1 over the span, the projection onto their coefficients, the system and its right-hand
+    side (`linear_steady_state`; the steady state with slack droppers adds its corrections to them)."""
+    n = len(z0_m)
+    basis = harmonic_basis(n, len(pantograph_receptance_m_N) + 1)
     project = basis.T * (2.0 / n)  # coefficients of harmonics 1..N_h-1 (orthogonal columns of norm^2 n / 2)
     i_cc = cc.T
     system = receptance_block(np.asarray(pantograph_receptance_m_N)) + project @ (i_cc @ basis)
     rhs = -project @ (np.asarray(z0_m, dtype=float) + i_cc @ np.full(n, mean_force_N))
-    coefficients = np.linalg.solve(system, rhs)
-    return LinearSteadyState(mean_force_N + basis @ coefficients, dt_s)
+    return basis, project, system, rhs
 
 
 def span_frequencies_rad_s(n: int, dt_s: float, n_harmonics: int) -> np.ndarray:
