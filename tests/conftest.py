@@ -4,10 +4,10 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -134,11 +134,11 @@ def _machine_share(item):
     link. Every other test holds a shared lock while it runs (its fixtures' set-up and tear-down
     included), a realtime test the exclusive one; a turnstile held by a waiting realtime test stops new
     shared holders, so that it is not starved. Waiting is on the locks (events), never on a time."""
-    uid = os.environ.get("PYTEST_XDIST_TESTRUNUID")
-    if uid is None:  # one process: nothing runs beside the test
+    shared = _shared_temp(item.session.config._tmp_path_factory)
+    if shared is None:  # one process: nothing runs beside the test
         yield
         return
-    base = Path(tempfile.gettempdir()) / f"pantohil-tests-{uid}"
+    base = shared / "machine-share"
     exclusive = item.get_closest_marker("realtime") is not None
     with open(f"{base}.turnstile", "a") as gate, open(f"{base}.lock", "a") as lock:
         fcntl.flock(gate, fcntl.LOCK_EX)
@@ -168,24 +168,67 @@ def pytest_runtest_protocol(item, nextitem):
         yield
 
 
+def _shared_temp(tmp_path_factory) -> Path | None:
+    """The folder the workers of this test session share (the parent of each worker's basetemp), or None
+    when the session runs in one process."""
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        return None
+    return tmp_path_factory.getbasetemp().parent
+
+
 @pytest.fixture(scope="session", autouse=True)
 def isolated_cache(tmp_path_factory):
-    """Build FMUs into a cache of the test session's own, so tests also exercise a cold cache."""
-    os.environ["PANTOHIL_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+    """Build FMUs and operators into a cache of the test session's own, so tests also exercise a cold cache.
+    The workers share it, as two pantohil processes of a user share theirs (every entry is written
+    atomically), so that no operator is built twice in one session."""
+    shared = _shared_temp(tmp_path_factory)
+    cache = shared / "cache" if shared is not None else tmp_path_factory.mktemp("cache")
+    cache.mkdir(exist_ok=True)
+    os.environ["PANTOHIL_CACHE"] = str(cache)
+
+
+def once_per_session(tmp_path_factory, name: str, make) -> Path:
+    """The folder `name` that `make(folder)` fills once in the whole test session; tests only read it. The
+    workers share it: the first to ask makes it under a lock, the others wait on the lock (an event) and
+    read it. A `make` that fails leaves nothing marked done, so the next test to ask makes it again."""
+    base = (_shared_temp(tmp_path_factory) or tmp_path_factory.getbasetemp()) / "once"
+    base.mkdir(exist_ok=True)
+    folder, done = base / name, base / f"{name}.done"
+    with open(base / f"{name}.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.exists():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            make(folder)
+            done.touch()
+    return folder
+
+
+def cli_into(*args: str, timeout: float = 600):
+    """A `make` for once_per_session: `pantohil *args` with "{out}" in them replaced by the folder, which must
+    succeed; its stdout is kept in the folder's stdout.txt."""
+    def make(folder: Path) -> None:
+        proc = pantohil(*[a.replace("{out}", str(folder)) for a in args], timeout=timeout)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        (folder / "stdout.txt").write_text(proc.stdout)
+    return make
 
 
 @pytest.fixture(scope="session")
 def default_fmus(tmp_path_factory) -> Path:
     """The folder of the default case's four FMUs (`pantohil build`), built once; tests only read them."""
-    out = tmp_path_factory.mktemp("default_fmus")
-    proc = pantohil("build", "--out", str(out))
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return out
+    return once_per_session(tmp_path_factory, "default_fmus", cli_into("build", "--out", "{out}/fmus")) / "fmus"
 
 
 @pytest.fixture(scope="session")
 def default_run(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("runs") / "default"
-    proc = pantohil("run", "--out", str(out), "--quiet")
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return out
+    """The run folder of the default case (`pantohil run`), run once; tests only read it."""
+    return once_per_session(tmp_path_factory, "default_run", cli_into("run", "--out", "{out}/default", "--quiet")) \
+        / "default"
+
+
+@pytest.fixture(scope="session")
+def plain_installed(tmp_path_factory) -> Path:
+    """The Python of a fresh venv holding a plain (not editable) install of this tree (plain_install), made once."""
+    return once_per_session(tmp_path_factory, "install", lambda folder: plain_install(folder / "venv")) \
+        / "venv" / "bin" / "python"

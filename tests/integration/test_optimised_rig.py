@@ -16,7 +16,7 @@ from test_rig_file_emulator import _run_against_the_emulator
 from pantohil.models.case import load_case
 from pantohil.models.hil.rig_loop import run_loop
 
-CASES = ["paper_d_stitched_oc1_300_rig", "paper_d_stitched_oc2_300_rig"]
+CASES = ["paper_d_stitched_oc1_300_rig", pytest.param("paper_d_stitched_oc2_300_rig", marks=pytest.mark.extended)]
 
 
 def _radius(case_file, relaxation: float, out) -> float:

@@ -19,7 +19,8 @@ pytestmark = pytest.mark.network
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("position", ["leading", "trailing"])  # the virtual one's place: the rig's is the other
+# the virtual one's place: the rig's is the other
+@pytest.mark.parametrize("position", ["leading", pytest.param("trailing", marks=pytest.mark.extended)])
 def test_a_pair_with_one_pantograph_on_the_rig_converges_to_the_all_virtual_pair(position, tmp_path):
     overrides = ["second_pantograph.spacing_m=90", f'second_pantograph.position="{position}"',
                  "hil.max_frequency_hz=10", PATIENT_LINK]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CASES_DIR, REFERENCE_DIR, pantohil
+from conftest import CASES_DIR, REFERENCE_DIR, cli_into, once_per_session, pantohil
 
 CASE = CASES_DIR / "pfem_benchmark_250.toml"
 REFERENCE = REFERENCE_DIR / "fem_sim_6.json"
@@ -14,10 +14,9 @@ REFERENCE = REFERENCE_DIR / "fem_sim_6.json"
 
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("fem") / "six"
-    proc = pantohil("fem-sim", str(CASE), "--spans", "6", "--central", "2", "--out", str(out), "--quiet")
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return out
+    """A 6-span section, run once in the session (tests only read it)."""
+    make = cli_into("fem-sim", str(CASE), "--spans", "6", "--central", "2", "--out", "{out}/six", "--quiet")
+    return once_per_session(tmp_path_factory, "fem_six", make) / "six"
 
 
 @pytest.mark.slow
@@ -87,11 +86,11 @@ PAIR = ["--set", "second_pantograph.spacing_m=100", "--set", 'second_pantograph.
 
 @pytest.fixture(scope="module")
 def pair_run(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("fem") / "pair"
-    proc = pantohil("fem-sim", str(CASE), "--spans", "8", "--central", "2", "--out", str(out), "--quiet", *PAIR)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert "second pantograph, trailing 100 m" in proc.stdout
-    return out
+    """An 8-span section with two pantographs, run once in the session (tests only read it)."""
+    make = cli_into("fem-sim", str(CASE), "--spans", "8", "--central", "2", "--out", "{out}/pair", "--quiet", *PAIR)
+    folder = once_per_session(tmp_path_factory, "fem_pair", make)
+    assert "second pantograph, trailing 100 m" in (folder / "stdout.txt").read_text()
+    return folder / "pair"
 
 
 @pytest.mark.slow

@@ -8,7 +8,6 @@ import tomllib
 from pathlib import Path
 
 import pytest
-from conftest import plain_install
 
 ROOT = Path(__file__).resolve().parents[2]
 VERSION = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
@@ -35,9 +34,8 @@ def test_public_api_in_this_install(tmp_path):
 
 
 @pytest.mark.slow
-def test_public_api_after_a_plain_pip_install(tmp_path):
-    venv = tmp_path / "venv"
-    py = plain_install(venv)
+def test_public_api_after_a_plain_pip_install(plain_installed, tmp_path):
+    py, venv = plain_installed, plain_installed.parents[1]
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     proc = subprocess.run([str(py), "-c", CHECK], cwd=elsewhere, capture_output=True, text=True)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from conftest import pantohil
+from conftest import cli_into, once_per_session, pantohil
 from pantohil.models.case import load_case
 from pair_references import closed_form_pair
 from pantohil.orchestrator.live_layout import layout_json, layout_topics
@@ -22,10 +22,10 @@ PAIR_RUN = ["second_pantograph.spacing_m=90", 'second_pantograph.position="leadi
 
 @pytest.fixture(scope="module")
 def pair_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("pair") / "run"
-    done = pantohil("run", *[a for s in PAIR_RUN for a in ("--set", s)], "--out", str(out), "--quiet")
-    assert done.returncode == 0, done.stdout + done.stderr
-    return out, done.stdout
+    """The pair's run (PAIR_RUN), run once in the session: its folder and stdout (tests only read them)."""
+    make = cli_into("run", *[a for s in PAIR_RUN for a in ("--set", s)], "--out", "{out}/run", "--quiet")
+    folder = once_per_session(tmp_path_factory, "pair_run", make)
+    return folder / "run", (folder / "stdout.txt").read_text()
 
 
 @pytest.mark.slow

@@ -132,7 +132,7 @@ def test_the_rig_map_is_in_pantohil_stability(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("speed", [300, 250, 200])
+@pytest.mark.parametrize("speed", [300, 250, pytest.param(200, marks=pytest.mark.extended)])
 def test_the_three_mass_cases_converge_through_paper_b_s_rig(speed):
     """Acceptance 2 of issue 16: the shipped 3-mass cases (Paper B's step-by-step updating, mu_c = 0.1, 25 Hz,
     extra loop delay E = 40) converge through the full Paper B chain, within 3 % RMS of the std of the rig-free
