@@ -54,6 +54,48 @@ def _layout(sizes: dict) -> tuple[dict, int]:
     return blocks, start
 
 
+class QueuedRankOne:
+    """The step-by-step map's rank-one updates X[i] += outer(C[i][j][:, m], delta_j) of P contact points (Paper D
+    eq. 10 on every unit state at once; X is P x N x dim, C[i][j] N x N), queued and applied a block of steps at a
+    time as matrix products; a row read in between is the applied row plus the queued updates' share of it. The
+    same sums as updating X at every step, in another order (equal to rounding), without rewriting all of X at
+    each step when one row of it is read."""
+
+    BLOCK = 32
+
+    def __init__(self, X: np.ndarray, C):
+        self.X, self.C = X, C
+        self.columns = np.zeros(self.BLOCK, dtype=int)
+        self.points = X.shape[0]
+        self.deltas = np.zeros((self.points, self.BLOCK, X.shape[2]))
+        self.count = 0
+
+    def open(self, m: int) -> None:
+        """Queue the updates of column m (each point's delta zero until `set`)."""
+        if self.count == self.BLOCK:
+            self.flush()
+        self.columns[self.count] = m
+        self.deltas[:, self.count] = 0.0
+        self.count += 1
+
+    def set(self, j: int, delta: np.ndarray) -> None:
+        """Point j's delta for the column opened last."""
+        self.deltas[j, self.count - 1] = delta
+
+    def row(self, i: int, r: int) -> np.ndarray:
+        """X[i, r] with the queued updates."""
+        k = self.columns[:self.count]
+        return self.X[i, r] + sum(self.C[i][j][r, k] @ self.deltas[j, :self.count] for j in range(self.points))
+
+    def flush(self) -> None:
+        """Apply the queued updates to X."""
+        k = self.columns[:self.count]
+        for i in range(self.points):
+            for j in range(self.points):
+                self.X[i] += self.C[i][j][:, k] @ self.deltas[j, :self.count]
+        self.count = 0
+
+
 def span_map(I_cc: np.ndarray, pan: LinearPantograph, settings: HilSettings, latency_steps: int) -> SpanMap:
     """A of X^(b+1) = A X^b (Paper D eqs. A.1-A.16) for the loop of models/hil/loop.py, with `latency_steps`
     between a force sample and the height it produces (1 = the thesis's unavoidable step)."""
@@ -68,6 +110,7 @@ def span_map(I_cc: np.ndarray, pan: LinearPantograph, settings: HilSettings, lat
     else:  # the catenary's z is I rf in step-by-step updating: keep them consistent
         rf = X[blocks["rf"]].copy()
         z = I_cc @ rf
+        z_updates = QueuedRankOne(z[None], [[I_cc]])
     pan_state = X[blocks["pantograph"]].copy()
     force = X[blocks["force"]][0].copy()
     flight = deque(X[blocks["in_flight"]][i].copy() for i in range(lag))
@@ -84,8 +127,9 @@ def span_map(I_cc: np.ndarray, pan: LinearPantograph, settings: HilSettings, lat
         else:  # Paper D eq. (10)
             delta = mu * (force - rf[n_bar])
             rf[n_bar] += delta
-            z += np.outer(I_cc[:, n_bar], delta)
-            command = z[target].copy()
+            z_updates.open(n_bar)
+            z_updates.set(0, delta)
+            command = z_updates.row(0, target)
         flight.append(command)
         z_act = flight.popleft()
         pan_state = pan.Pp @ pan_state + np.outer(pan.pz, z_act) + np.outer(pan.pf, force)

@@ -26,7 +26,7 @@ from pantohil.models.hil.rig_loop import LOOP_CONNECTIONS
 from pantohil.models.pantograph.interface import linear_pantograph
 from pantohil.models.pantograph.linear import LinearPantograph
 
-from .maps import SpanMap, _layout
+from .maps import QueuedRankOne, SpanMap, _layout
 
 POINTS = PairedHil.POINTS
 
@@ -67,6 +67,9 @@ def pair_span_map(hil: PairIteration, pan: LinearPantograph, latency_steps: tupl
     flights = [deque(X[blocks[f"in_flight_{i + 1}"]][m].copy() for m in range(lags[i])) for i in range(POINTS)]
     block_force = np.zeros((POINTS, n, dim))
     mu = s.relaxation
+    if not span:
+        z_updates = QueuedRankOne(z, ops if Q is None else IQ)
+        rf_updates = None if Q is None else QueuedRankOne(rf, Q)
     for n_bar in range(n):
         targets = [(n_bar + d) % n for d in hil.delays]
         if span:  # Paper D eq. (3) at each point
@@ -77,22 +80,25 @@ def pair_span_map(hil: PairIteration, pan: LinearPantograph, latency_steps: tupl
                 rf = rf + mu * _compensated(Q, block_force - rf)
                 z_older, z = z, _heights(ops, rf)
         else:  # eq. (10) for both points' residuals
+            z_updates.open(n_bar)
+            if rf_updates is not None:
+                rf_updates.open(n_bar)
             for j in range(POINTS):
-                delta = mu * (force[j] - rf[j, n_bar])
                 if Q is None:
+                    delta = mu * (force[j] - rf[j, n_bar])
                     rf[j, n_bar] += delta
-                    for i in range(POINTS):
-                        z[i] += np.outer(ops[i][j][:, n_bar], delta)
                 else:  # f_relaxed += delta Q(:, n_bar), z += delta (I Q)(:, n_bar)
-                    for i in range(POINTS):
-                        rf[i] += np.outer(Q[i][j][:, n_bar], delta)
-                        z[i] += np.outer(IQ[i][j][:, n_bar], delta)
-            commands = [z[i, targets[i]].copy() for i in range(POINTS)]
+                    delta = mu * (force[j] - rf_updates.row(j, n_bar))
+                    rf_updates.set(j, delta)
+                z_updates.set(j, delta)
+            commands = [z_updates.row(i, targets[i]) for i in range(POINTS)]
         for i in range(POINTS):
             flights[i].append(commands[i])
             z_act = flights[i].popleft()
             pan_state[i] = pan.Pp @ pan_state[i] + np.outer(pan.pz, z_act) + np.outer(pan.pf, force[i])
             force[i] = pan.c @ pan_state[i] + pan.cz * z_act
+    if not span and rf_updates is not None:
+        rf_updates.flush()
     rows = [rf.reshape(POINTS * n, dim)] + ([z_older.reshape(POINTS * n, dim)] if span else [])
     rows += [pan_state.reshape(POINTS * pan.size, dim), force]
     rows += [np.vstack(list(f)) for f in flights if f]

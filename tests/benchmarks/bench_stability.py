@@ -1,4 +1,5 @@
-"""Stability map budget: a 20 x 20 map (f_max x contact stiffness, best relaxation at
+"""Stability map budget: the step-by-step span maps' construction against its per-step reference; a 20 x 20
+map (f_max x contact stiffness, best relaxation at
 every point) of the default case within 30 s on 2 Dask workers; how it scales from 1 to 2 Dask workers; and the cost of
 one spectral radius by each construction. Prints medians; not a timed test.
 
@@ -51,12 +52,53 @@ def per_radius_costs() -> None:
         print(f"  {name:38s} {statistics.median(times) * 1e3:8.1f} ms  (rho {rho:.6f})")
 
 
+def step_map_builds() -> None:
+    """The step-by-step span maps' construction, its updates queued a block of steps at a time (QueuedRankOne),
+    against the same construction with a block of one step (the rank-one update of every unit state at every
+    step, the reference), one point and the pair at L = 70 m (10 Hz), in this run; medians of 3."""
+    from pantohil.models.case import load_case
+    from pantohil.models.catenary.receptance import asm_operator
+    from pantohil.models.hil.loop import HilSettings
+    from pantohil.models.hil.pair_loop import pair_delay_steps, pair_iteration
+    from pantohil.models.pantograph.interface import linear_pantograph
+    from pantohil.models.stability import maps
+    from pantohil.models.stability.pair_map import pair_loop_latency_steps, pair_span_map
+
+    one = load_case(None, [])
+    op = maps.circulant_dense(asm_operator(one.catenary, one.speed_m_s, one.samples_per_span, one.dt_s,
+                                           one.n_harmonics).kernel)
+    pair = load_case(None, ["hil.max_frequency_hz=10", "second_pantograph.spacing_m=70"])
+    hil = pair_iteration(pair, pair_delay_steps(pair))
+    builds = {
+        "one point": lambda: maps.span_map(op, linear_pantograph(one.pantograph, one.dt_s),
+                                           HilSettings("step", 0.1, 8), 8),
+        "pair, L = 70 m": lambda: pair_span_map(hil, linear_pantograph(pair.pantograph, pair.dt_s),
+                                                pair_loop_latency_steps(pair)),
+    }
+    block = maps.QueuedRankOne.BLOCK
+    print("step-by-step span map, construction only (median of 3):")
+    for name, build in builds.items():
+        medians = {}
+        for size in (1, block):
+            maps.QueuedRankOne.BLOCK = size
+            times = []
+            for _ in range(3):
+                t = time.perf_counter()
+                build()
+                times.append(time.perf_counter() - t)
+            medians[size] = statistics.median(times)
+        maps.QueuedRankOne.BLOCK = block
+        print(f"  {name:16s} queued ({block} steps) {medians[block]:6.2f} s, per step (reference) {medians[1]:6.2f} s: "
+              f"{medians[1] / medians[block]:.1f}x", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--size", type=int, default=20)
     ap.add_argument("--update", choices=("step", "span", "both"), default="both")
     args = ap.parse_args()
+    step_map_builds()
     per_radius_costs()
     updates = ("step", "span") if args.update == "both" else (args.update,)
     for update in updates:

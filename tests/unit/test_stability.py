@@ -120,3 +120,29 @@ def test_the_span_map_has_a_barrier_at_the_contact_frequency(kc):
         pb = problem_for("span", pan, case.dt_s, 8, 8, kernel=operator(case, factor * fc).kernel)
         best[factor] = best_relaxation(pb)[1]
     assert best[0.85] < 1.0 and best[1.05] > 1.15, best
+
+
+def test_queued_rank_one_updates_are_the_per_step_updates():
+    """QueuedRankOne (the step-by-step maps' updates of every unit state, applied a block at a time) against the
+    rank-one update at every step on random operators of two points: every row read between and the final X
+    equal to rounding (1e-12 of the largest entry), over more steps than a block and a partial last block."""
+    from pantohil.models.stability.maps import QueuedRankOne
+
+    rng = np.random.default_rng(7)
+    n, dim, points = 50, 12, 2
+    C = [[rng.standard_normal((n, n)) for _ in range(points)] for _ in range(points)]
+    X0 = rng.standard_normal((points, n, dim))
+    queued, plain = QueuedRankOne(X0.copy(), C), X0.copy()
+    worst = 0.0
+    for m in rng.permutation(n)[:45]:
+        queued.open(int(m))
+        for j in range(points):
+            delta = rng.standard_normal(dim)
+            queued.set(j, delta)
+            for i in range(points):
+                plain[i] += np.outer(C[i][j][:, m], delta)
+        r = int(rng.integers(n))
+        worst = max(worst, *(np.max(np.abs(queued.row(i, r) - plain[i, r])) for i in range(points)))
+    queued.flush()
+    worst = max(worst, np.max(np.abs(queued.X - plain)))
+    assert worst < 1e-12 * np.max(np.abs(plain))
