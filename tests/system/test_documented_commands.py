@@ -35,7 +35,7 @@ SHORT = {  # a command's first words -> overrides that keep it short (the comman
     "pantohil optimise": "--max-designs 3 --explore 0 --no-confirm",
     "pantohil run --set hil.update=span": "--set run.max_spans=3",
     "pantohil run system.ssp": "--set run.max_spans=3",
-    "pantohil stability --set second_pantograph.spacing_m=70": "--update span",
+    "pantohil stability --set second_pantograph.spacing_m=70": "--update step",  # both: test_two_pantographs_cli.py
 }
 READY = {"pantohil rig-emulator": ("stdout", "listening on"), "dask scheduler": ("stderr", "Scheduler at"),
          "dask worker": ("stderr", "Registered to")}
