@@ -67,6 +67,7 @@ def pair_span_map(hil: PairIteration, pan: LinearPantograph, latency_steps: tupl
     flights = [deque(X[blocks[f"in_flight_{i + 1}"]][m].copy() for m in range(lags[i])) for i in range(POINTS)]
     block_force = np.zeros((POINTS, n, dim))
     mu = s.relaxation
+    rf_updates = None  # step-by-step: rf through its queue where the compensation Q spreads each residual
     if not span:
         z_updates = QueuedRankOne(z, ops if Q is None else IQ)
         rf_updates = None if Q is None else QueuedRankOne(rf, Q)
@@ -97,7 +98,7 @@ def pair_span_map(hil: PairIteration, pan: LinearPantograph, latency_steps: tupl
             z_act = flights[i].popleft()
             pan_state[i] = pan.Pp @ pan_state[i] + np.outer(pan.pz, z_act) + np.outer(pan.pf, force[i])
             force[i] = pan.c @ pan_state[i] + pan.cz * z_act
-    if not span and rf_updates is not None:
+    if rf_updates is not None:
         rf_updates.flush()
     rows = [rf.reshape(POINTS * n, dim)] + ([z_older.reshape(POINTS * n, dim)] if span else [])
     rows += [pan_state.reshape(POINTS * pan.size, dim), force]

@@ -37,11 +37,11 @@ def _figures(err: dict) -> str:
 
 # (case, rig file, limit on the difference to the in-process loop as it starts, its measured figure)
 LOOP_CASES = [
-    pytest.param("paper_b_mass_300", "paper_b", 0.005, marks=pytest.mark.extended),         # 0.023 %
-    ("paper_b_pantograph_300", "paper_b", 0.005),                                      # 0.015 %
-    pytest.param("paper_b_pantograph_250", "paper_b", 0.005, marks=pytest.mark.extended),   # 0.0066 %
+    pytest.param("paper_b_mass_300", "paper_b", 0.005, marks=pytest.mark.extended),        # 0.023 %
+    ("paper_b_pantograph_300", "paper_b", 0.005),                                           # 0.015 %
+    pytest.param("paper_b_pantograph_250", "paper_b", 0.005, marks=pytest.mark.extended),  # 0.0066 %
     ("paper_d_mass_300", "paper_d", 0.015),  # 1.05 %: the drive's clock phase, see the docstring
-    pytest.param("paper_d_mass_250", "paper_d", 0.005, marks=pytest.mark.extended),         # 0.30 %
+    pytest.param("paper_d_mass_250", "paper_d", 0.005, marks=pytest.mark.extended),        # 0.30 %
 ]
 
 
