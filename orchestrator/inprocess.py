@@ -33,6 +33,8 @@ from pantohil.models.case import Case
 
 from .master import RecordingMaster
 
+CHUNK_STEPS = 1024  # compiled steps between two looks at a stop request (a span of most cases)
+
 ENGINES = ("fmu", "inprocess")
 _KINDS = {"Real": "Real", "Integer": "Integer", "Boolean": "Boolean", "String": "String"}
 
@@ -102,6 +104,9 @@ class InProcessMaster(RecordingMaster):
         self._hil, self._z0 = cat.stepped_iteration, cat.static_heights_m
         self._rig, self._pan = self.slaves["rig"].stepped_rig, self.slaves["pantograph"].stepped_pantograph
         self._block_ns: list[float] = []  # wall time per step of each block
+        from pantohil.models.hil.span_kernel import SpanKernel  # here: it imports the compiler, if there is one
+
+        self._kernel = SpanKernel.of(self._hil, self._rig, self._pan)  # None: stepped in Python
         self._check_outputs()
 
     def _check_outputs(self) -> None:
@@ -116,6 +121,8 @@ class InProcessMaster(RecordingMaster):
         """Up to `count` steps within the current span; stops before a step once `stop` is requested
         ("interrupted") and after a step whose force in use or command is beyond the limits (or NaN:
         "diverged"). Returns None, "interrupted" or "diverged"; the records cover every step taken."""
+        if self._kernel is not None:
+            return self._run_compiled(count, stop, force_limit, height_limit)
         hil, rig_step, pan_step = self._hil, self._rig.step, self._pan.step
         pan, fe, n = self._pan, self._hil.force_estimate, self._hil.n
         cat, rig, pant = self.values["catenary"], self.values["rig"], self.values["pantograph"]
@@ -140,6 +147,34 @@ class InProcessMaster(RecordingMaster):
             self._block_ns.append((time.perf_counter_ns() - t0) / len(rows))
             self._record(rows)
         return outcome
+
+    def _run_compiled(self, count: int, stop, force_limit: float, height_limit: float):
+        """`run_steps` through the compiled block (models/hil/span_kernel.py), `CHUNK_STEPS` at a time between
+        looks at `stop`: the same steps and records to the bit."""
+        i_cmd, i_act, i_meas, i_f = self._value_index
+        inputs = np.array([self.values["catenary"][i_cmd], self.values["rig"][i_act], self.values["rig"][i_meas],
+                           self.values["pantograph"][i_f]])
+        limits, outcome, done = np.array([force_limit, height_limit], dtype=float), None, 0
+        rows = np.empty((count, 7))  # span_kernel.ROW_FIELDS
+        t0 = time.perf_counter_ns()
+        while done < count:
+            if stop is not None and stop.requested:
+                outcome = "interrupted"
+                break
+            taken, diverged = self._kernel.run(min(CHUNK_STEPS, count - done), inputs, limits, rows[done:])
+            done += taken
+            if diverged:
+                outcome = "diverged"
+                break
+        if done:
+            self._block_ns.append((time.perf_counter_ns() - t0) / done)
+            self._record(rows[:done])
+        return outcome
+
+    @property
+    def compiled_blocks(self) -> bool:
+        """Whether the steps run as compiled blocks (models/hil/span_kernel.py) rather than model by model."""
+        return self._kernel is not None
 
     @property
     def _value_index(self) -> tuple[int, int, int, int]:

@@ -173,10 +173,11 @@ class ChainPantograph:
         """One HHT step with unilateral contact: free unless the head would penetrate the wire."""
         x = self._x
         x[-3], x[-2] = z_next, self.force
-        new = self._step_free.dot(x)  # the same product as `@` (BLAS gemv), with less overhead per call
+        # numpy's pairwise row sums, not BLAS: the order the compiled block repeats (models/hil/span_kernel.py)
+        new = (self._step_free * x).sum(axis=1)
         gap = self.head_ref + new.item(0) - z_next
         if gap > 0.0:
-            new = self._step_act.dot(x)
+            new = (self._step_act * x).sum(axis=1)
             gap = self.head_ref + new.item(0) - z_next
         x[:-3] = new  # [u, v, a] of the new step
         self.z = z_next

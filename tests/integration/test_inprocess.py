@@ -26,6 +26,7 @@ class KeepRecords(RunObserver):
         self.ints = {n: (master.int_outputs[n], a[rows].copy()) for n, a in master.record_int.items()}
         self.inputs = {n: (master.input_names[n], a[rows].copy()) for n, a in master.record_in.items()}
         self.values = {n: list(v) for n, v in master.values.items()}
+        self.compiled = getattr(master, "compiled_blocks", None)
 
 
 def _both(case, tmp_path):
@@ -59,8 +60,37 @@ def test_the_default_case_is_the_same_to_the_bit_in_process(tmp_path):
     case = load_case(None, [])
     runs = _both(case, tmp_path)
     _assert_identical(runs, tmp_path)
-    assert runs["inprocess"][0].converged
+    assert runs["inprocess"][0].converged and runs["inprocess"][1].compiled
     assert runs["inprocess"][0].fmus == []
+
+
+def test_a_rig_with_a_drive_ramp_a_servo_and_a_load_cell_is_the_same_to_the_bit_in_compiled_blocks(tmp_path):
+    case = load_case(None, ["rig.comm_decimation=4", "rig.servo_bandwidth_hz=40", "rig.loadcell_cutoff_hz=30",
+                            "rig.force_offset_N=2.5", "run.max_spans=4"])
+    runs = _both(case, tmp_path)
+    assert runs["inprocess"][1].compiled
+    _assert_identical(runs, tmp_path)
+
+
+def test_the_compiled_blocks_and_their_numpy_path_are_the_same_to_the_bit(tmp_path, monkeypatch):
+    """PANTOHIL_JIT=0 steps the models one call at a time in Python (the path where numba is missing), also when
+    the iteration diverges (a rig delay the advance does not cover, relaxation 0.9: stopped at the force limit)."""
+    for overrides in ([], ["rig.delay_steps=40", "hil.delay_compensation=false", "hil.relaxation=0.9",
+                           "run.max_spans=40"]):
+        case = load_case(None, overrides)
+        runs = {}
+        for jit in ("1", "0"):
+            monkeypatch.setenv("PANTOHIL_JIT", jit)
+            keep = KeepRecords()
+            runs[jit] = run_case(case, tmp_path / f"{len(overrides)}_{jit}", progress=False, engine="inprocess",
+                                 observers=(keep,)), keep
+        (s_jit, r_jit), (s_py, r_py) = runs["1"], runs["0"]
+        assert r_jit.compiled and not r_py.compiled
+        assert (s_jit.status, s_jit.spans, r_jit.k) == (s_py.status, s_py.spans, r_py.k)
+        assert s_jit.status == ("diverged" if overrides else "converged"), s_jit.status
+        assert s_jit.convergence == s_py.convergence and r_jit.values == r_py.values
+        for name, (_, block) in r_py.outputs.items():
+            assert np.array_equal(r_jit.outputs[name][1], block, equal_nan=True), name
 
 
 @pytest.mark.slow
