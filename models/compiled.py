@@ -12,6 +12,8 @@ from collections.abc import Callable
 JIT_ENV = "PANTOHIL_JIT"  # "0": never compile (the numpy paths), whatever is installed
 
 _compiled: dict[Callable, Callable | None] = {}
+_helpers: list[Callable] = []  # `inlined` functions, registered with numba when a kernel is first compiled
+_registered: set[Callable] = set()
 
 
 def jit_wanted() -> bool:
@@ -34,9 +36,11 @@ def _numba():
 
 
 def inlined(fn: Callable) -> Callable:
-    """`fn` callable from compiled kernels (numba's register_jitable) and still a plain function."""
-    numba = _numba() if jit_wanted() else None
-    return fn if numba is None else numba.extending.register_jitable(fn)
+    """Mark `fn` as callable from compiled kernels; it stays the plain function (numba is not imported here:
+    the Python paths, the FMUs' among them, never load the compiler). `compiled` registers the marked
+    functions with numba (register_jitable) before it compiles a kernel."""
+    _helpers.append(fn)
+    return fn
 
 
 def compiled(fn: Callable) -> Callable | None:
@@ -46,5 +50,10 @@ def compiled(fn: Callable) -> Callable | None:
         return None
     if fn not in _compiled:
         numba = _numba()
+        if numba is not None:
+            for helper in _helpers:
+                if helper not in _registered:
+                    numba.extending.register_jitable(helper)
+                    _registered.add(helper)
         _compiled[fn] = None if numba is None else numba.njit(cache=True, nogil=True)(fn)
     return _compiled[fn]

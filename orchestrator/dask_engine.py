@@ -32,8 +32,10 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
             client.close()
         return
     n = workers or max(1, min(os.cpu_count() or 1, 2))
+    # the workers' own loggers at CRITICAL: a task's failure reaches the client as its exception, and what a
+    # worker logs as an error is the heartbeat that meets the closing scheduler (with a traceback) at the end
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           silence_logs=logging.ERROR)
+                           silence_logs=logging.CRITICAL)
     client = Client(cluster)
     try:
         yield client

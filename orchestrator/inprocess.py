@@ -196,7 +196,7 @@ class InProcessMaster(RecordingMaster):
 
     def _columns(self, k0: int, rows: list, corrections: np.ndarray) -> dict[str, dict]:
         """Every output of steps k0.. by FMU and name, from the rows the steps kept (see `run_steps`)."""
-        block = np.array(rows, dtype=float)
+        block = np.asarray(rows, dtype=float)
         count = len(block)
         labels = np.arange(k0, k0 + count) % self._hil.n
         cat = {"height_command": block[:, 0], "height_at_sample": block[:, 1], "force_at_sample": block[:, 2],

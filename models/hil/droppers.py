@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from pantohil.models.hil.kernels import solve_small
 from pantohil.models.hil.loop import UPDATES, HilSettings, commands_ahead, hold
 from pantohil.models.catenary.pfem.operator_data import PfemOperators
 from pantohil.models.catenary.pfem.steady_state import irfft_rows
@@ -131,9 +132,11 @@ class PfemHil:
         return out
 
     def _correct(self, n_bar: int) -> None:
-        """Eqs. (38)-(40) at each dropper's instant of phase n_bar, then eqs. (36)-(37)."""
+        """Eqs. (38)-(40) at each dropper's instant of phase n_bar, then eqs. (36)-(37). The sums of products are
+        numpy's pairwise sums and the small system is `solve_small`, in the order the compiled block
+        (models/hil/kernels.py `dropper_corrections`) repeats to the bit."""
         B = self._basis_at[n_bar]  # [d, j]
-        dl = np.einsum("dj,dj->d", B, self.elongation)
+        dl = (B * self.elongation).sum(axis=1)
         old = self.correction_at[n_bar]
         self.current_correction = old  # a view: updated in place below
         slack = dl < self._slack_below  # eq. (38): k_d dL < -f_d0
@@ -143,7 +146,7 @@ class PfemHil:
             col = self._dd_at[n_bar, a]  # [observed e, j]
             new = 0.0
             if slack[a]:
-                daa = col[a] @ B[a]
+                daa = (col[a] * B[a]).sum()
                 new = (-self.f0[a] - self.kd[a] * (dl[a] - daa * old[a])) / (1.0 + self.kd[a] * daa)
             change = self.mu_d * (new - old[a])
             old[a] += change
@@ -159,14 +162,15 @@ class PfemHil:
         if len(s):
             rows = active[s]
             # D[r, a]: elongation of slack dropper r per unit correction of active dropper a
-            D = np.einsum("aej,ej->ea", cols[:, rows], B[rows])
+            D = np.ascontiguousarray((cols[:, rows] * B[rows][None]).sum(axis=2).T)
             ks = self.kd[rows]
-            rhs = -self.f0[rows] - ks * (dl[rows] - D @ old_a)
+            rhs = -self.f0[rows] - ks * (dl[rows] - (D * old_a).sum(axis=1))
             if len(s) == 1:
                 new[s] = rhs / (1.0 + ks[0] * D[0, s[0]])
             else:
-                new[s] = np.linalg.solve(np.eye(len(s)) + ks[:, None] * D[:, s], rhs)  # eq. (40)
+                new[s] = solve_small(np.eye(len(s)) + ks[:, None] * D[:, s], rhs)  # eq. (40)
         change = self.mu_d * (new - old_a)
         old[active] += change  # a view: correction_at[n_bar]
-        self.z += change @ self.ops.cd[n_bar, active]  # eq. (36)
-        self.elongation += (change @ cols.reshape(len(active), -1)).reshape(self.elongation.shape)  # eq. (37)
+        for i, a in enumerate(active):  # eqs. (36)-(37), dropper by dropper
+            self.z += change[i] * self.ops.cd[n_bar, a]
+            self.elongation += change[i] * cols[i]

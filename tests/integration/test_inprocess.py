@@ -29,6 +29,15 @@ class KeepRecords(RunObserver):
         self.compiled = getattr(master, "compiled_blocks", None)
 
 
+class KeepCorrections(KeepRecords):
+    """KeepRecords, and the most droppers with a correction force at one phase at the end."""
+
+    def on_end(self, run) -> None:
+        super().on_end(run)
+        hil = run.master.slaves["catenary"].stepped_iteration
+        self.most_slack_at_once = int((hil.correction_at != 0.0).sum(axis=1).max())
+
+
 def _both(case, tmp_path):
     out = {}
     for engine in ("fmu", "inprocess"):
@@ -97,8 +106,29 @@ def test_the_compiled_blocks_and_their_numpy_path_are_the_same_to_the_bit(tmp_pa
 def test_a_pfem_case_with_droppers_is_the_same_to_the_bit_in_process(tmp_path):
     case = load_case(CASES_DIR / "pfem_benchmark_250.toml", [])
     runs = _both(case, tmp_path)
+    assert runs["inprocess"][1].compiled
     _assert_identical(runs, tmp_path)
     assert runs["inprocess"][0].droppers == runs["fmu"][0].droppers
+
+
+@pytest.mark.slow
+def test_pfem_span_by_span_with_slack_droppers_is_the_same_compiled_and_in_python(tmp_path, monkeypatch):
+    """The PFEM block with span-by-span updating and several droppers slack at once (the small system of Paper C
+    eq. 40) steps as the models do one call at a time (PANTOHIL_JIT=0)."""
+    case = load_case(CASES_DIR / "pfem_benchmark_250.toml", ["hil.update=span", "hil.relaxation=0.3",
+                                                             "run.max_spans=12"])
+    runs = {}
+    for jit in ("1", "0"):
+        monkeypatch.setenv("PANTOHIL_JIT", jit)
+        keep = KeepCorrections()
+        runs[jit] = run_case(case, tmp_path / jit, progress=False, engine="inprocess", observers=(keep,)), keep
+    (s_jit, r_jit), (s_py, r_py) = runs["1"], runs["0"]
+    assert r_jit.compiled and not r_py.compiled
+    assert r_py.most_slack_at_once >= 2, "the case must exercise the several-dropper system"
+    assert (s_jit.status, s_jit.spans, r_jit.k) == (s_py.status, s_py.spans, r_py.k)
+    assert s_jit.convergence == s_py.convergence and r_jit.values == r_py.values
+    for name, (_, block) in r_py.outputs.items():
+        assert np.array_equal(r_jit.outputs[name][1], block, equal_nan=True), name
 
 
 def _channels(path) -> dict[str, int]:

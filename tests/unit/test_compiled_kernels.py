@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from pantohil.models.compiled import compiled
-from pantohil.models.hil.span_kernel import _row_products
+from pantohil.models.hil.kernels import PAIRWISE_MAX, pairwise_dot, row_products, solve_small
 
 
 @pytest.mark.parametrize("shape", [(3, 6), (6, 9), (9, 12), (15, 18), (4, 17), (2, 24)])
-def test_the_compiled_row_products_are_numpys_pairwise_sums_to_the_bit(shape):
-    kernel = compiled(_row_products)
+def test_the_compiledrow_products_are_numpys_pairwise_sums_to_the_bit(shape):
+    kernel = compiled(row_products)
     assert kernel is not None, "numba is a dependency: the kernels compile"
     rng = np.random.default_rng(shape[1])
     for _ in range(200):  # magnitudes 1e-6..1e6 apart, where a different order of the sum changes its last bits
@@ -24,4 +24,28 @@ def test_the_compiled_row_products_are_numpys_pairwise_sums_to_the_bit(shape):
 
 def test_no_kernel_is_compiled_with_pantohil_jit_0(monkeypatch):
     monkeypatch.setenv("PANTOHIL_JIT", "0")
-    assert compiled(_row_products) is None
+    assert compiled(row_products) is None
+
+
+def test_the_compiled_pairwise_dot_is_numpys_sum_of_products_to_the_bit():
+    kernel = compiled(pairwise_dot)
+    rng = np.random.default_rng(7)
+    for n in range(1, PAIRWISE_MAX + 1):  # every length the kernels take
+        for _ in range(10):
+            a = rng.normal(size=n) * 10.0 ** rng.integers(-6, 7, size=n)
+            b = rng.normal(size=n) * 10.0 ** rng.integers(-6, 7, size=n)
+            assert kernel(a, b) == (a * b).sum() == pairwise_dot(a, b)
+
+
+def test_the_small_solve_is_the_same_compiled_and_in_python_and_solves():
+    kernel = compiled(solve_small)
+    rng = np.random.default_rng(3)
+    for m in (1, 2, 3, 5, 9):
+        for _ in range(20):
+            A = np.eye(m) + rng.normal(size=(m, m)) * 10.0 ** rng.integers(-3, 3)
+            b = rng.normal(size=m)
+            x_py, x_jit = solve_small(A.copy(), b.copy()), kernel(A.copy(), b.copy())
+            assert np.array_equal(x_py, x_jit)
+            # LAPACK's solve, an independent method: agreement to the rounding of a well-conditioned system
+            x_ref = np.linalg.solve(A, b)
+            assert np.allclose(x_py, x_ref, rtol=1e-9 * np.linalg.cond(A), atol=0.0)
