@@ -8,13 +8,22 @@ order, then the other packages' names sorted, the same in every process of one e
 """
 from __future__ import annotations
 
+import functools
 import importlib.metadata
+import sys
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
 from pantohil.models.errors import InputError
 
 T = TypeVar("T")
+
+
+@functools.lru_cache(maxsize=64)
+def _group_entry_points(group: str, path: tuple[str, ...]) -> dict[str, importlib.metadata.EntryPoint]:
+    """The entry points of `group` in the distributions on `path` (sys.path): scanning them takes about 10 ms,
+    and a run asks a few dozen times; a package installed later is found by a new process, or a new path."""
+    return {ep.name: ep for ep in importlib.metadata.entry_points(group=group)}
 
 
 class Registry(Generic[T]):
@@ -27,7 +36,7 @@ class Registry(Generic[T]):
         self._loaded: dict[str, T] = {}
 
     def _entry_points(self) -> dict[str, importlib.metadata.EntryPoint]:
-        found = {ep.name: ep for ep in importlib.metadata.entry_points(group=self.group)}
+        found = _group_entry_points(self.group, tuple(sys.path))
         return {name: found[name] for name in sorted(found) if name not in self._builtins}
 
     def builtin_names(self) -> tuple[str, ...]:

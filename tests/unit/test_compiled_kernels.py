@@ -49,3 +49,32 @@ def test_the_small_solve_is_the_same_compiled_and_in_python_and_solves():
             # LAPACK's solve, an independent method: agreement to the rounding of a well-conditioned system
             x_ref = np.linalg.solve(A, b)
             assert np.allclose(x_py, x_ref, rtol=1e-9 * np.linalg.cond(A), atol=0.0)
+
+
+def test_a_damaged_compile_cache_entry_is_compiled_again(tmp_path):
+    """The in-process engine's kernel from a compile cache whose entries are garbage: the run succeeds (the same
+    convergence as with a sound cache), the entries are written anew, and the log names the cache."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "PANTOHIL_JIT")}
+    env["PANTOHIL_CACHE"] = str(tmp_path / "cache")
+    args = [sys.executable, "-m", "pantohil.orchestrator.cli", "run", "--engine", "inprocess", "--no-plots", "--quiet",
+            "--set", "run.max_spans=4"]
+    first = subprocess.run([*args, "--out", str(tmp_path / "a")], env=env, capture_output=True, text=True,
+                           timeout=600)
+    assert first.returncode in (0, 1), first.stderr  # 1: stopped at run.max_spans before converging
+    entries = sorted((tmp_path / "cache" / "numba").rglob("kernels.*.nb*"))
+    assert entries, "the kernel was compiled into the cache"
+    for entry in entries:
+        entry.write_bytes(b"garbage")
+    second = subprocess.run([*args, "--out", str(tmp_path / "b")], env=env, capture_output=True, text=True,
+                            timeout=600)
+    assert second.returncode == first.returncode, second.stderr
+    assert "Traceback" not in second.stderr
+    assert all(e.read_bytes() != b"garbage" for e in sorted((tmp_path / "cache" / "numba").rglob("kernels.*.nb*")))
+    spans = [json.loads((tmp_path / r / "summary.json").read_text())["convergence"] for r in "ab"]
+    assert spans[0] == spans[1]
+    assert "the compile cache entries of kernels" in second.stderr and "compiling again" in second.stderr
