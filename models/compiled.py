@@ -31,7 +31,10 @@ def _numba():
     if "NUMBA_CACHE_DIR" not in os.environ:  # numba reads it when first imported
         from pantohil.models.storage import cache_folder, cache_root
 
-        os.environ["NUMBA_CACHE_DIR"] = str(cache_folder(cache_root() / "numba"))
+        # numba keys an entry on its function's source file only: a folder per version of this module, whose
+        # compile options and helper registration shape every kernel, keeps a change here from loading old code
+        version = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:12]
+        os.environ["NUMBA_CACHE_DIR"] = str(cache_folder(cache_root() / "numba" / version))
     try:
         import numba
         import numba.extending
