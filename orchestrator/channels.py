@@ -1,14 +1,17 @@
-"""The channels of a run, shared by the MCAP log (run.mcap) and the live Foxglove stream: JSON schemas
-and JSON encodings, so that both carry the same topics, schemas and bytes for the same step.
+"""The channels of a run, shared by the MCAP log (run.mcap) and the live Foxglove stream, so that both carry
+the same topics, schemas and bytes for the same step.
 
-Per-step groups ("/catenary", "/rig", ...) have one number per signal; per-span channels are
-"/convergence" (the span's figures) and "/span_force" (the force of the span just closed and of the
-span before, as whole arrays, for a current-over-previous plot against the sample index).
+Per-step groups ("/catenary", "/rig", ...) have one float64 per signal, as ROS 2 messages (schema encoding
+"ros2msg", message encoding "cdr": the 4-byte CDR header, then the doubles), which Foxglove decodes and which
+are built for a whole span at once with numpy. Per-span channels are JSON with a JSON schema:
+"/convergence" (the span's figures) and "/span_force" (the force of the span just closed and of the span
+before, as whole arrays, for a current-over-previous plot against the sample index).
 """
 from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 
@@ -38,9 +41,37 @@ SPAN_FORCE_SCHEMA = {"title": "/span_force", "type": "object", "properties": {
 EVENT_SCHEMAS = {"/convergence": _number_schema("/convergence", CONVERGENCE_FIELDS), "/span_force": SPAN_FORCE_SCHEMA}
 
 
+GROUP_SCHEMA_ENCODING = "ros2msg"
+GROUP_MESSAGE_ENCODING = "cdr"
+CDR_HEADER = b"\x00\x01\x00\x00"  # plain CDR, little-endian (ROS 2's encapsulation); the doubles follow unpadded
+_FIELD = re.compile(r"^float64 ([A-Za-z][A-Za-z0-9_]*)(?:\s*#\s*(.*))?$")
+
+
 def group_schema(topic: str, fields: dict[str, str]) -> bytes:
-    """JSON schema of a per-step group: simulated time t and one number per signal."""
-    return json.dumps(_number_schema(topic, fields)).encode()
+    """ROS 2 message definition of a per-step group: simulated time t and one float64 per signal, each with its
+    description (and unit) as a comment."""
+    lines = [f"# {topic}: one message per step", "float64 t  # simulated time [s]"]
+    lines += [f"float64 {name}  # {' '.join(desc.split())}" for name, desc in fields.items()]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def group_fields(schema: bytes) -> dict[str, str]:
+    """Field -> description of a per-step group's message definition, in message order (a line that is not
+    `float64 name  # description`, or a comment line, is not a field)."""
+    fields = {}
+    for line in schema.decode("utf-8", errors="replace").splitlines():
+        found = _FIELD.match(line.strip())
+        if found:
+            fields[found.group(1)] = found.group(2) or ""
+    return fields
+
+
+def decode_row(keys: list[str], data: bytes) -> dict:
+    """One per-step message as {field: value}; a non-finite value as None (what JSON's null was)."""
+    if len(data) != len(CDR_HEADER) + 8 * len(keys) or data[:len(CDR_HEADER)] != CDR_HEADER:
+        raise ValueError(f"a per-step message of {len(data)} bytes is not {len(keys)} little-endian CDR doubles")
+    values = np.frombuffer(data, dtype="<f8", offset=len(CDR_HEADER)).tolist()
+    return {k: v if math.isfinite(v) else None for k, v in zip(keys, values, strict=True)}
 
 
 def event_schema(topic: str) -> bytes:
@@ -54,28 +85,24 @@ def schema_name(topic: str) -> str:
 
 
 class RowEncoder:
-    """JSON messages of one per-step group, one per row (t[i], columns[i, :]); JSON has no NaN: null."""
+    """The messages of one per-step group, one per row (t[i], columns[i, :]): CDR_HEADER and the row's doubles."""
 
     def __init__(self, fields):
         self.keys = ["t", *fields]
-        self._template = "{" + ",".join(f'"{n}":%.10g' for n in self.keys) + "}"
+        self._dtype = np.dtype([("header", f"V{len(CDR_HEADER)}"), ("values", "<f8", (len(self.keys),))])
+
+    def rows(self, t: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """The messages of the rows as a structured array (CDR header, doubles), row i the message of step i."""
+        t = np.asarray(t, dtype=float)
+        out = np.empty(len(t), dtype=self._dtype)
+        out["header"] = CDR_HEADER
+        out["values"][:, 0] = t
+        out["values"][:, 1:] = np.asarray(columns, dtype=float).reshape(len(t), -1)
+        return out
 
     def encode(self, t: np.ndarray, columns: np.ndarray) -> list[bytes]:
-        """One JSON message per step from the times and the signal columns (non-finite values as null)."""
-        columns = np.asarray(columns, dtype=float)
-        t = np.asarray(t, dtype=float)
-        if bool(np.isfinite(columns).all()):  # every row formatted by one call, split at the newlines
-            if not len(t):
-                return []
-            values = np.column_stack([t, columns.reshape(len(t), -1)]).ravel().tolist()
-            return ((self._template + "\n") * len(t) % tuple(values)).encode().split(b"\n")[:-1]
-        rows = zip(t.tolist(), columns.tolist(), strict=False)
-        return [
-            json.dumps(
-                dict(zip(self.keys, [ti, *[v if math.isfinite(v) else None for v in row]], strict=False))
-            ).encode()
-            for ti, row in rows
-        ]
+        """One message per step from the times and the signal columns."""
+        return [row.tobytes() for row in self.rows(t, columns)]
 
 
 def _finite(value):

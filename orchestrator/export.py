@@ -10,26 +10,17 @@ from pathlib import Path
 from pantohil.models.case import CaseError
 from pantohil.models.storage import atomic_path
 
-from .mcap_follow import McapFollower, McapFollowError
+from .mcap_follow import McapFollowError, read_log
 
 SPAN_TOPICS = ("/convergence", "/span_force")  # one message per span, not per step
-MAX_POLLS = 1_000_000
 
 
 def _log_messages(path: Path) -> list[tuple[str, int, dict]]:
     """Every message of a finished log."""
-    follower, out = McapFollower(path), []
-    for _ in range(MAX_POLLS):
-        try:
-            batch = follower.poll()
-        except McapFollowError as exc:
-            raise CaseError(f"export: {exc}") from None
-        out.extend(batch)
-        if follower.finished:
-            return out
-        if not batch:
-            raise CaseError(f"export: {path} is unfinished (its run is still writing it, or was killed)")
-    raise CaseError(f"export: {path} has more records than {MAX_POLLS} reads take")
+    try:
+        return read_log(path)
+    except McapFollowError as exc:
+        raise CaseError(f"export: {exc}") from None
 
 
 def step_table(folder: Path):

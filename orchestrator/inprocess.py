@@ -155,7 +155,7 @@ class InProcessMaster(RecordingMaster):
         inputs = np.array([self.values["catenary"][i_cmd], self.values["rig"][i_act], self.values["rig"][i_meas],
                            self.values["pantograph"][i_f]])
         limits, outcome, done = np.array([force_limit, height_limit], dtype=float), None, 0
-        rows = np.empty((count, 7))  # span_kernel.ROW_FIELDS
+        rows = np.empty((count, len(self._kernel.ROW_FIELDS)))
         t0 = time.perf_counter_ns()
         while done < count:
             if stop is not None and stop.requested:

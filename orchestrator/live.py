@@ -11,13 +11,15 @@ per-client backlog of BACKLOG_MESSAGES messages, so a slow or vanished viewer co
 from __future__ import annotations
 
 import collections
+import functools
+import logging
 import threading
 from collections.abc import Callable
 
 import numpy as np
 
-from .channels import (EVENT_SCHEMAS, RowEncoder, encode_event, event_schema, group_schema, schema_name,
-                       span_force_record)
+from .channels import (EVENT_SCHEMAS, GROUP_MESSAGE_ENCODING, GROUP_SCHEMA_ENCODING, RowEncoder, encode_event,
+                       event_schema, group_schema, schema_name, span_force_record)
 
 LIVE_RATE_HZ = 100.0     # per-step channels, in simulated time (the log keeps every step)
 POLL_S = 0.1             # wall time between two wakes of the publisher thread (each wake takes the GIL
@@ -29,6 +31,19 @@ BACKLOG_MESSAGES = 1024  # per client, in the server (foxglove-sdk drops the old
 DEFAULT_PORT = 8765      # Foxglove's usual port
 
 Block = Callable[[str, int, int], np.ndarray]  # (topic, start, stop) -> columns of steps start..stop-1
+
+
+@functools.cache
+def _quiet_sdk() -> None:
+    """foxglove-sdk's own log goes below CRITICAL (a viewer that drops its connection is not the run's news),
+    without the root handler its set-up would add."""
+    import foxglove
+
+    root = logging.getLogger()
+    handlers = list(root.handlers)
+    foxglove.set_log_level(logging.CRITICAL)
+    for handler in [h for h in root.handlers if h not in handlers]:
+        root.removeHandler(handler)
 
 
 def parse_live(value: str | None) -> tuple[str, int]:
@@ -68,14 +83,16 @@ class LivePublisher:
                  completed: Callable[[], int], block: Block, name: str = "pantohil"):
         import foxglove
 
+        _quiet_sdk()
         self._context = foxglove.Context()
         self._viewers = _Viewers()
         self._server = foxglove.start_server(name=name, host=endpoint[0], port=endpoint[1], context=self._context,
                                              server_listener=self._viewers, message_backlog_size=BACKLOG_MESSAGES)
         self.host, self.port = endpoint[0], self._server.port
-        self._channels = {topic: self._channel(foxglove, topic, group_schema(topic, fields))
-                          for topic, fields in groups.items()}
-        self._channels.update({topic: self._channel(foxglove, topic, event_schema(topic)) for topic in EVENT_SCHEMAS})
+        self._channels = {topic: self._channel(foxglove, topic, GROUP_SCHEMA_ENCODING, group_schema(topic, fields),
+                                               GROUP_MESSAGE_ENCODING) for topic, fields in groups.items()}
+        self._channels.update({topic: self._channel(foxglove, topic, "jsonschema", event_schema(topic), "json")
+                               for topic in EVENT_SCHEMAS})
         self._encoders = {topic: RowEncoder(fields) for topic, fields in groups.items()}
         self.dt_s = dt_s
         self.decimation = max(1, int(round(1.0 / (LIVE_RATE_HZ * dt_s))))
@@ -87,10 +104,10 @@ class LivePublisher:
         self._thread = threading.Thread(target=self._loop, name="pantohil-live", daemon=True)
         self._thread.start()
 
-    def _channel(self, foxglove, topic: str, schema: bytes):
-        return foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name(topic), encoding="jsonschema",
+    def _channel(self, foxglove, topic: str, schema_encoding: str, schema: bytes, message_encoding: str):
+        return foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name(topic), encoding=schema_encoding,
                                                               data=schema),
-                                message_encoding="json", context=self._context)
+                                message_encoding=message_encoding, context=self._context)
 
     @property
     def url(self) -> str:

@@ -3,10 +3,13 @@ messages of the records that are complete in the file, and remembers where the n
 
 The framing of MCAP records (opcode: 1 byte, length: uint64 little-endian, then the content) tells
 where a complete record ends; the records themselves (chunks, schemas, channels, messages) are read
-by the mcap library. The writer (foxglove-sdk's, the mcap crate) writes a chunk with placeholders
-(length and sizes all ones), then seeks back and patches its length and then its header field by
-field: a chunk whose length is final but whose compressed size does not yet agree with it, at the end
-of what is in the file, is not complete yet.
+by the mcap library. pantohil's writer appends each record whole; a writer that writes a chunk with
+placeholders (length and sizes all ones) and then patches its length and its header field by field (the
+mcap crate's, foxglove-sdk's) can leave a chunk whose length is final but whose compressed size does not yet
+agree with it at the end of what is in the file: it is not complete yet.
+
+Per-step messages are decoded by their channel's schema (orchestrator/channels.py: CDR rows of float64, a
+non-finite value read as None), per-span messages as JSON objects.
 """
 from __future__ import annotations
 
@@ -23,6 +26,8 @@ from mcap.stream_reader import StreamReader
 from pantohil.models.errors import InputError
 from pantohil.models.input_files import InputFileError, read_input_chunk
 
+from .channels import GROUP_MESSAGE_ENCODING, GROUP_SCHEMA_ENCODING, decode_row, group_fields
+
 MAGIC = b"\x89MCAP0\r\n"
 _HEADER = struct.Struct("<BQ")
 _CHUNK = 0x06
@@ -32,6 +37,7 @@ _CHUNK_FIXED = 8 + 8 + 8 + 4  # message start and end time, uncompressed size an
 # is not refused by itself: a poll that reads a whole window of MAX_POLL_BYTES without one complete record is.
 MAX_RECORD_BYTES = 32 * 1024 * 1024
 MAX_POLL_BYTES = 2 * MAX_RECORD_BYTES  # read per poll: always room for one whole record
+MAX_POLLS = 1_000_000
 _UNIT = re.compile(r"\[([^\]]*)\]\s*$")
 
 
@@ -78,18 +84,36 @@ def _message(data: bytes) -> dict:
     return msg
 
 
-def schema_units(data: bytes) -> dict[str, str]:
-    """Field -> unit of a channel's JSON schema, from each description's closing `[unit]` ("[-]": none)."""
+def _descriptions(encoding: str, data: bytes) -> dict[str, str]:
+    """Field -> description of a channel's schema (a JSON schema's, or a per-step group's message definition)."""
+    if encoding == GROUP_SCHEMA_ENCODING:
+        return group_fields(data)
     try:
         properties = json.loads(data).get("properties", {})
     except (ValueError, AttributeError):
         return {}
+    return {name: str(spec.get("description", "")) for name, spec in properties.items() if isinstance(spec, dict)} \
+        if isinstance(properties, dict) else {}
+
+
+def schema_units(encoding: str, data: bytes) -> dict[str, str]:
+    """Field -> unit of a channel's schema, from each description's closing `[unit]` ("[-]": none)."""
     units = {}
-    for name, spec in properties.items() if isinstance(properties, dict) else ():
-        found = _UNIT.search(str(spec.get("description", ""))) if isinstance(spec, dict) else None
+    for name, description in _descriptions(encoding, data).items():
+        found = _UNIT.search(description)
         if found and found.group(1) != "-":
             units[name] = found.group(1)
     return units
+
+
+def channel_decoder(message_encoding: str, schema: Schema | None):
+    """data -> message dict for a channel: a per-step group's CDR rows by its schema's fields, else JSON."""
+    if message_encoding == GROUP_MESSAGE_ENCODING and schema is not None and schema.encoding == GROUP_SCHEMA_ENCODING:
+        keys = list(group_fields(schema.data))
+        return lambda data: decode_row(keys, data)
+    if message_encoding == "json":
+        return _message
+    raise ValueError(f"channel encoding {message_encoding!r} is not one pantohil writes")
 
 
 class McapFollower:
@@ -102,7 +126,8 @@ class McapFollower:
         self.metadata: dict[str, str] = {}
         self.units: dict[str, dict[str, str]] = {}  # topic -> field -> unit, from the channels' JSON schemas
         self._topics: dict[int, str] = {}
-        self._schemas: dict[int, bytes] = {}
+        self._decoders: dict[int, object] = {}
+        self._schemas: dict[int, Schema] = {}
 
     def poll(self) -> list[tuple[str, int, dict]]:
         """The messages of the records completed since the last poll, as (topic, log time ns, JSON)."""
@@ -136,12 +161,15 @@ class McapFollower:
         try:
             for record in StreamReader(io.BytesIO(records), skip_magic=True).records:
                 if isinstance(record, Schema):
-                    self._schemas[record.id] = record.data
+                    self._schemas[record.id] = record
                 elif isinstance(record, Channel):
+                    schema = self._schemas.get(record.schema_id)
                     self._topics[record.id] = record.topic
-                    self.units[record.topic] = schema_units(self._schemas.get(record.schema_id, b""))
+                    self._decoders[record.id] = channel_decoder(record.message_encoding, schema)
+                    self.units[record.topic] = schema_units(schema.encoding, schema.data) if schema else {}
                 elif isinstance(record, Message) and record.channel_id in self._topics:
-                    out.append((self._topics[record.channel_id], record.log_time, _message(record.data)))
+                    decoded = self._decoders[record.channel_id](record.data)
+                    out.append((self._topics[record.channel_id], record.log_time, decoded))
                 elif isinstance(record, Metadata) and record.name == "run":
                     self.metadata = dict(record.metadata)
                 elif isinstance(record, (Footer, Chunk)):
@@ -152,3 +180,18 @@ class McapFollower:
             detail = " ".join(str(exc).split())[:200] or type(exc).__name__
             raise McapFollowError(f"{self.path}: a record cannot be read ({detail})") from None
         return out
+
+
+def read_log(path: Path, topics: tuple[str, ...] | None = None) -> list[tuple[str, int, dict]]:
+    """Every message of a finished log as (topic, log time ns, decoded message), of `topics` if given; an
+    unfinished log (its writer still at work, or killed) is refused."""
+    follower, out = McapFollower(path), []
+    for _ in range(MAX_POLLS):
+        offset = follower.offset
+        batch = follower.poll()
+        out.extend(m for m in batch if topics is None or m[0] in topics)
+        if follower.finished:
+            return out
+        if follower.offset == offset:  # nothing more is complete
+            raise McapFollowError(f"{path} is unfinished (its run is still writing it, or was killed)")
+    raise McapFollowError(f"{path} has more records than {MAX_POLLS} reads take")

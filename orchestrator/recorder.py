@@ -1,102 +1,77 @@
-"""MCAP run log: one JSON-schema channel per signal group (Foxglove plots `/topic.field`).
+"""MCAP run log: one channel per signal group (Foxglove plots `/topic.field`): per-step groups as ROS 2
+messages of float64 fields (CDR), per-span records as JSON (orchestrator/channels.py).
 
 Samples are buffered by the master and handed over a span at a time to a writer process, so that
-logging costs the stepping loop almost nothing. `close()` always finishes the file, and the writer
-finishes it by itself if the run's process dies, so a run that stops early stays readable.
+logging costs the stepping loop almost nothing; the writer turns a span of a group into chunks with numpy
+(orchestrator/mcap_file.py). `close()` always finishes the file, and the writer finishes it by itself if the
+run's process dies, so a run that stops early stays readable.
 """
 from __future__ import annotations
 
 import contextlib
 import errno
 import fcntl
-import logging
 import multiprocessing as mp
 import os
 import resource
 import signal
 from pathlib import Path
 
-import foxglove
 import numpy as np
-from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-from .channels import EVENT_SCHEMAS, RowEncoder, encode_event, event_schema, group_schema, schema_name
+from .channels import (EVENT_SCHEMAS, GROUP_MESSAGE_ENCODING, GROUP_SCHEMA_ENCODING, RowEncoder, encode_event,
+                       event_schema, group_schema, schema_name)
+from .mcap_file import CHUNK_BYTES, McapFile
 from .pacing import background_priority
 from .stopping import shielded
 
 
-def _quiet_sdk() -> None:
-    """foxglove-sdk prints one line per message it fails to log (a full disk: one per remaining message of
-    the block, hundreds); the writer's flush and close raise the failure once, which is what is reported.
-    Its own log goes below CRITICAL, without the root handler its set-up would add."""
-    root = logging.getLogger()
-    handlers = list(root.handlers)
-    foxglove.set_log_level(logging.CRITICAL)
-    for handler in [h for h in root.handlers if h not in handlers]:
-        root.removeHandler(handler)
-
-
-_quiet_sdk()
-CHUNK_BYTES = 1 << 16  # small chunks: a file cut short loses at most one; `pantohil watch` reads complete chunks
-
-
 class McapWriter:
-    """Writes messages in the calling process, through foxglove-sdk's MCAP writer (zstd chunks).
-
-    Every channel is registered when the writer opens; a channel appears in the file with its first
-    message (foxglove-sdk writes a channel's records lazily)."""
+    """Writes a run's log in the calling process. Every channel is written when the writer opens."""
 
     def __init__(self, path: Path, groups: dict[str, dict[str, str]], metadata: dict[str, str] | None = None):
-        self._context = foxglove.Context()  # this file's own channels, apart from a live server's
-        options = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_threads=0, chunk_size=CHUNK_BYTES,
-                                   profile="")
-        self._writer = foxglove.open_mcap(Path(path), allow_overwrite=True, context=self._context,
-                                          writer_options=options)
+        self._file = McapFile(Path(path))
         if metadata:
-            self._writer.write_metadata("run", {k: str(v) for k, v in metadata.items()})
+            self._file.metadata("run", {k: str(v) for k, v in metadata.items()})
         self._channels = {}
         self._encoders = {}
         for topic, fields in groups.items():
-            self._channels[topic] = self._channel(topic, group_schema(topic, fields))
+            schema = self._file.schema(schema_name(topic), GROUP_SCHEMA_ENCODING, group_schema(topic, fields))
+            self._channels[topic] = self._file.channel(topic, schema, GROUP_MESSAGE_ENCODING)
             self._encoders[topic] = RowEncoder(fields)
         for topic in EVENT_SCHEMAS:
             self._event_channel(topic)
         self.messages = 0
         self._closed = False
 
-    def _channel(self, topic: str, schema: bytes):
-        return foxglove.Channel(topic, message_encoding="json", context=self._context,
-                                schema=foxglove.Schema(name=schema_name(topic), encoding="jsonschema", data=schema))
-
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
         """Write rows (t[i], columns[i, :]) as messages of one channel, at log time t[i]."""
-        log = self._channels[topic].log
-        encoded = self._encoders[topic].encode(t, columns)
-        for ns, data in zip(np.rint(np.asarray(t, dtype=float) * 1e9).astype(np.int64).tolist(), encoded,
-                            strict=False):
-            log(data, log_time=ns)
+        t = np.asarray(t, dtype=float)
+        self._file.messages(self._channels[topic], np.rint(t * 1e9).astype(np.int64),
+                            self._encoders[topic].rows(t, columns))
         self.messages += len(t)
 
-    def _event_channel(self, topic: str):
+    def _event_channel(self, topic: str) -> int:
         if topic not in self._channels:
-            self._channels[topic] = self._channel(topic, event_schema(topic))
+            schema = self._file.schema(schema_name(topic), "jsonschema", event_schema(topic))
+            self._channels[topic] = self._file.channel(topic, schema, "json")
         return self._channels[topic]
 
     def write_event(self, topic: str, t: float, record: dict) -> None:
         """Log one JSON message (a per-span record or an event) on a topic at simulated time t [s]."""
-        self._event_channel(topic).log(encode_event(t, record), log_time=int(round(t * 1e9)))
+        data = np.frombuffer(encode_event(t, record), dtype=np.uint8)
+        self._file.messages(self._event_channel(topic), np.array([int(round(t * 1e9))]), data.reshape(1, -1))
         self.messages += 1
 
     def flush(self) -> None:
-        """Close the current chunk and hand the file's bytes to the OS, so that a reader of the growing
-        file sees whole records."""
-        self._writer.flush()
+        """Hand the file's bytes to the OS, so that a reader of the growing file sees whole records."""
+        self._file.flush()
 
     def close(self) -> None:
         """Finish the MCAP file (summary and footer) once, so that it stays readable."""
         if not self._closed:
             self._closed = True
-            self._writer.close()
+            self._file.close()
 
 
 PIPE_BYTES = 1 << 20  # a span of samples fits: handing it over never blocks the stepping loop
@@ -133,10 +108,8 @@ def _writer_process(conn, send_end, parent_pid: int, path: str, groups: dict, me
     try:
         writer = McapWriter(Path(path), groups, metadata)
         while (msg := _receive(conn, parent_pid)) is not None:
-            if msg[0] == "block":
-                writer.write_block(*msg[1:])
-            elif msg[0] == "event":
-                writer.write_event(*msg[1:])
+            for kind, *args in msg[1] if msg[0] == "batch" else ():
+                (writer.write_block if kind == "block" else writer.write_event)(*args)
             writer.flush()
         writer.close()
     except Exception:  # a full disk, a size limit: the file keeps its complete chunks; the parent says why
@@ -148,7 +121,7 @@ def _writer_process(conn, send_end, parent_pid: int, path: str, groups: dict, me
 
 
 def _write_error(path: Path) -> OSError:
-    """The error of a writer process that could not write `path` (foxglove-sdk does not say which): the
+    """The error of a writer process that could not write `path` (its exit code does not say which): the
     file size limit reached (EFBIG), no room left on its disk (ENOSPC), else an I/O error."""
     code = errno.EIO
     with contextlib.suppress(OSError):
@@ -180,6 +153,8 @@ class McapRecorder:
         recv.close()
         self._path = Path(path)
         self.messages = 0
+        self._batch: list[tuple] = []
+        self._batch_messages = 0
         self._closed = False
 
     def _post(self, msg: tuple, messages: int) -> None:
@@ -195,21 +170,30 @@ class McapRecorder:
             raise _write_error(self._path) from None
 
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
-        """Send a block of per-step rows of a topic to the logger process."""
-        self._post(("block", topic, np.asarray(t), np.asarray(columns)), len(t))
+        """Add a block of per-step rows of a topic to what the next `flush` sends."""
+        self._batch.append(("block", topic, np.asarray(t), np.asarray(columns)))
+        self._batch_messages += len(t)
 
     def write_event(self, topic: str, t: float, record: dict) -> None:
-        """Send one JSON message of a topic to the logger process."""
-        self._post(("event", topic, t, record), 1)
+        """Add one JSON message of a topic to what the next `flush` sends."""
+        self._batch.append(("event", topic, t, record))
+        self._batch_messages += 1
 
     def flush(self) -> None:
-        """Nothing to do: the logger process flushes after every message it writes."""
+        """Send what was written since the last flush to the logger process in one message (one chunk of the
+        file): one hand-over per span, however many groups it logs."""
+        if self._batch:
+            batch, messages = self._batch, self._batch_messages
+            self._batch, self._batch_messages = [], 0
+            self._post(("batch", batch), messages)
 
     def close(self, timeout_s: float = 120.0) -> None:
         """Tell the logger process to finish the MCAP file and wait for it, at most timeout_s."""
         if self._closed:
             return
         self._closed = True
+        with contextlib.suppress(BrokenPipeError, OSError):
+            self.flush()
         with contextlib.suppress(BrokenPipeError, OSError), shielded():
             self._send.send(("close",))
         self._send.close()

@@ -63,6 +63,8 @@ def _pfem_arguments(hil: PfemHil):
 class SpanKernel:
     """The three models' state in arrays for the compiled block, and back (`run`)."""
 
+    ROW_FIELDS = ROW_FIELDS
+
     def __init__(self, fn, catenary_arguments, hil, rig: Rig, pan: ChainPantograph):
         self.fn, self.catenary_arguments, self.hil, self.rig, self.pan = fn, catenary_arguments, hil, rig, pan
         self.new = np.empty(pan._step_free.shape[0])

@@ -1,6 +1,5 @@
 """Model exchange: the same run under libcosim, from an SSP file, from the OSP system
 structure, and from a partner package in a fresh virtual environment with no repository on the path."""
-import json
 import os
 import subprocess
 import sys
@@ -9,9 +8,9 @@ import zipfile
 import numpy as np
 import pytest
 from fmpy.ssp.ssd import read_ssd
-from mcap.reader import make_reader
 
 from conftest import load_run, pantohil
+from pantohil.orchestrator.mcap_follow import read_log
 
 
 @pytest.fixture(scope="module")
@@ -76,10 +75,7 @@ def test_osp_system_structure_runs_in_libcosim(ssp, default_run):
     for _ in range(1500):
         assert ex.step()
         got.append(obs.last_real_values(index, [vr])[0])
-    with open(default_run / "run.mcap", "rb") as fh:
-        want = [json.loads(m.data)["contact_force"] for _, _, m in make_reader(fh).iter_messages(topics=["/catenary"])][
-            :1500
-        ]
+    want = [m["contact_force"] for _, _, m in read_log(default_run / "run.mcap", ("/catenary",))][:1500]
     assert np.max(np.abs(np.array(got) - np.array(want))) <= 1e-6
 
 

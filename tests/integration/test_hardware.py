@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
 
 from conftest import PATIENT_LINK, load_run, pantohil
 from pantohil.fmus import udp_protocol as proto
+from pantohil.orchestrator.mcap_follow import read_log
 
 pytestmark = pytest.mark.network
 
@@ -72,8 +72,7 @@ class Emulator:
 
 
 def mcap_rows(path: Path, topic: str) -> list[dict]:
-    with open(path, "rb") as fh:
-        return [json.loads(m.data) for _, _, m in make_reader(fh).iter_messages(topics=[topic])]
+    return [m for _, _, m in read_log(path, (topic,))]
 
 
 def rel_rms(a, b):

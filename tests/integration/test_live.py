@@ -75,8 +75,9 @@ def test_live_client_receives_the_logged_values(tmp_path):
     assert set(advertised) == set(schemas)  # the same channels
     for topic, channel in advertised.items():
         name, encoding, data = schemas[topic]
-        assert (channel["schemaName"], channel["schemaEncoding"], channel["encoding"]) == (name, encoding, "json")
-        assert json.loads(channel["schema"]) == json.loads(data)
+        expected = ("ros2msg", "cdr") if topic not in ("/convergence", "/span_force") else ("jsonschema", "json")
+        assert (channel["schemaName"], channel["schemaEncoding"], channel["encoding"]) == (name, *expected)
+        assert encoding == expected[0] and channel["schema"].encode() == data
     assert set(received) == set(schemas), f"no live messages on {set(schemas) - set(received)}"
     for topic, messages in received.items():
         for log_time_ns, payload in messages:  # every live message is the logged one of the same step

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import CASES_DIR, REFERENCE_DIR, cli_into, once_per_session, pantohil
+from pantohil.orchestrator.mcap_follow import read_log
 
 CASE = CASES_DIR / "pfem_benchmark_250.toml"
 REFERENCE = REFERENCE_DIR / "fem_sim_6.json"
@@ -118,9 +119,8 @@ def test_a_pair_writes_the_second_pantographs_force_summary_and_channel(pair_run
     assert counts["/pantograph"] == counts["/pantograph_2"] == 8 * 792
     fields = []
     for topic in ("/pantograph", "/pantograph_2"):
-        with open(pair_run / "run.mcap", "rb") as fh:
-            schema, channel, msg = next(make_reader(fh).iter_messages(topics=[topic]))
-        fields.append((schema.name, set(json.loads(msg.data))))
+        _, _, msg = read_log(pair_run / "run.mcap", (topic,))[0]
+        fields.append((topic, set(msg)))
     assert fields[0][1] == fields[1][1] == {"t", "x_m", "contact_force", "filtered_force"}, fields
     assert (pair_run / "force_along_section.png").stat().st_size > 0
 

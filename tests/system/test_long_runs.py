@@ -1,15 +1,13 @@
 """Long runs keep a bounded record: the master's rings hold the last spans only."""
-import json
 
 import numpy as np
-from mcap.reader import make_reader
 
 from conftest import load_run, pantohil
+from pantohil.orchestrator.mcap_follow import read_log
 
 
 def mcap_rows(path, topic: str) -> list[dict]:
-    with open(path, "rb") as fh:
-        return [json.loads(m.data) for _, _, m in make_reader(fh).iter_messages(topics=[topic])]
+    return [m for _, _, m in read_log(path, (topic,))]
 
 
 def test_the_master_keeps_a_bounded_record(tmp_path):

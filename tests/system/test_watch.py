@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from pantohil.orchestrator.mcap_follow import McapFollower
+from pantohil.orchestrator.mcap_follow import McapFollower, read_log
 from pantohil.orchestrator.recorder import McapWriter
 from pantohil.orchestrator.watch import span_line
 
@@ -59,9 +59,9 @@ def test_follower_reads_complete_records_of_a_growing_file(tmp_path):
 
 
 def test_a_chunk_whose_header_is_being_patched_is_not_read_yet(tmp_path):
-    """The writer patches a finished chunk's length, then its header field by field: seen between the two,
-    the chunk's compressed size is still all ones. The follower waits for it instead of failing ("a
-    record cannot be read"), and reads it once it is patched."""
+    """A writer that patches a finished chunk's length, then its header field by field (the mcap crate's, in
+    foxglove-sdk): seen between the two, the chunk's compressed size is still all ones. The follower waits for
+    it instead of failing ("a record cannot be read"), and reads it once it is patched."""
     path = tmp_path / "run.mcap"
     writer = McapWriter(path, GROUPS, {"case": "patched"})
     _span(writer, 0)
@@ -80,7 +80,8 @@ def test_a_chunk_whose_header_is_being_patched_is_not_read_yet(tmp_path):
     follower = McapFollower(growing)
     assert follower.poll() == [] and follower.offset == offset
     growing.write_bytes(whole[:end])  # the header patched
-    assert [m["span"] for topic, _, m in follower.poll() if topic == "/convergence"] == [0]
+    got = follower.poll()
+    assert got and got[0] == read_log(path)[0]
 
 
 @pytest.mark.slow
