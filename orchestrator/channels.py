@@ -45,11 +45,15 @@ GROUP_SCHEMA_ENCODING = "ros2msg"
 GROUP_MESSAGE_ENCODING = "cdr"
 CDR_HEADER = b"\x00\x01\x00\x00"  # plain CDR, little-endian (ROS 2's encapsulation); the doubles follow unpadded
 _FIELD = re.compile(r"^float64 ([A-Za-z][A-Za-z0-9_]*)(?:\s*#\s*(.*))?$")
+_ROS2_NAME = re.compile(r"[a-z](?:[a-z0-9]|_(?!_))*(?<!_)")  # a ROS 2 field name, which Foxglove's parser reads
 
 
 def group_schema(topic: str, fields: dict[str, str]) -> bytes:
     """ROS 2 message definition of a per-step group: simulated time t and one float64 per signal, each with its
     description (and unit) as a comment."""
+    bad = [name for name in fields if not _ROS2_NAME.fullmatch(name)]
+    if bad:
+        raise ValueError(f"{topic}: {bad[0]!r} is not a ROS 2 field name (lower case, digits, single underscores)")
     lines = [f"# {topic}: one message per step", "float64 t  # simulated time [s]"]
     lines += [f"float64 {name}  # {' '.join(desc.split())}" for name, desc in fields.items()]
     return ("\n".join(lines) + "\n").encode()

@@ -2,9 +2,10 @@
 messages of float64 fields (CDR), per-span records as JSON (orchestrator/channels.py).
 
 Samples are buffered by the master and handed over a span at a time to a writer process, so that
-logging costs the stepping loop almost nothing; the writer turns a span of a group into chunks with numpy
-(orchestrator/mcap_file.py). `close()` always finishes the file, and the writer finishes it by itself if the
-run's process dies, so a run that stops early stays readable.
+logging costs the stepping loop almost nothing: the span's arrays through shared memory
+(orchestrator/shared_ring.py), one small message per span through a pipe. The writer turns the span into a
+chunk with numpy (orchestrator/mcap_file.py). `close()` always finishes the file, and the writer finishes it
+by itself if the run's process dies, so a run that stops early stays readable.
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ from .channels import (EVENT_SCHEMAS, GROUP_MESSAGE_ENCODING, GROUP_SCHEMA_ENCOD
                        event_schema, group_schema, schema_name)
 from .mcap_file import CHUNK_BYTES, McapFile
 from .pacing import background_priority
+from .shared_ring import RingClosed, SharedRing
 from .stopping import shielded
 
 
@@ -74,7 +76,8 @@ class McapWriter:
             self._file.close()
 
 
-PIPE_BYTES = 1 << 20  # a span of samples fits: handing it over never blocks the stepping loop
+PIPE_BYTES = 1 << 20  # a span's message fits: handing it over never blocks the stepping loop
+RING_BYTES = 32 << 20  # spans of samples waiting for the writer (about 150 spans of the default case)
 WRITE_FAILED = 75  # exit code of a writer process whose file could not be written
 POLL_S = 0.25  # how often a writer waiting for the next message looks whether its parent is still there
 
@@ -100,7 +103,20 @@ def _receive(conn, parent_pid: int):
     return None if msg[0] == "close" else msg
 
 
-def _writer_process(conn, send_end, parent_pid: int, path: str, groups: dict, metadata: dict | None) -> None:
+def _write_batch(writer: McapWriter, ring: SharedRing, batch: list, produced: int) -> None:
+    """Write a span's entries (blocks in the ring or in the message, events), then free their room in the ring."""
+    for kind, topic, *args in batch:
+        if kind == "shared":
+            writer.write_block(topic, ring.get(*args[:2]), ring.get(*args[2:]))
+        elif kind == "block":
+            writer.write_block(topic, *args)
+        else:
+            writer.write_event(topic, *args)
+    ring.consume(produced)
+
+
+def _writer_process(conn, send_end, ring: SharedRing, parent_pid: int, path: str, groups: dict,
+                    metadata: dict | None) -> None:
     send_end.close()  # only the parent may hold the writing end: its death is then an end of file here
     _detach_from_parent()
     background_priority()  # the stepping loop and a rig emulator on this machine come first
@@ -108,8 +124,8 @@ def _writer_process(conn, send_end, parent_pid: int, path: str, groups: dict, me
     try:
         writer = McapWriter(Path(path), groups, metadata)
         while (msg := _receive(conn, parent_pid)) is not None:
-            for kind, *args in msg[1] if msg[0] == "batch" else ():
-                (writer.write_block if kind == "block" else writer.write_event)(*args)
+            if msg[0] == "batch":
+                _write_batch(writer, ring, *msg[1:])
             writer.flush()
         writer.close()
     except Exception:  # a full disk, a size limit: the file keeps its complete chunks; the parent says why
@@ -144,10 +160,11 @@ class McapRecorder:
     def __init__(self, path: Path, groups: dict[str, dict[str, str]], metadata: dict[str, str] | None = None):
         ctx = mp.get_context("fork")
         recv, self._send = ctx.Pipe(duplex=False)
+        self._ring = SharedRing(RING_BYTES)
         with contextlib.suppress(OSError, AttributeError):  # the default pipe size only blocks logging longer
             fcntl.fcntl(self._send.fileno(), fcntl.F_SETPIPE_SZ, PIPE_BYTES)
         self._proc = ctx.Process(target=_writer_process,
-                                 args=(recv, self._send, os.getpid(), str(path), groups, metadata),
+                                 args=(recv, self._send, self._ring, os.getpid(), str(path), groups, metadata),
                                  name="pantohil-mcap", daemon=False)
         self._proc.start()
         recv.close()
@@ -170,8 +187,18 @@ class McapRecorder:
             raise _write_error(self._path) from None
 
     def write_block(self, topic: str, t: np.ndarray, columns: np.ndarray) -> None:
-        """Add a block of per-step rows of a topic to what the next `flush` sends."""
-        self._batch.append(("block", topic, np.asarray(t), np.asarray(columns)))
+        """Add a block of per-step rows of a topic to what the next `flush` sends: copied into the shared ring
+        (waiting while the writer has not freed the room), or in the message if it is larger than the ring."""
+        t, columns = np.asarray(t, dtype=float), np.asarray(columns, dtype=float)
+        if self._ring.fits(t) and self._ring.fits(columns):
+            try:
+                self._batch.append(("shared", topic, *self._ring.put(t, self._proc.is_alive),
+                                    *self._ring.put(columns, self._proc.is_alive)))
+            except RingClosed:
+                self._proc.join(10)
+                raise _write_error(self._path) from None
+        else:
+            self._batch.append(("block", topic, t, columns))
         self._batch_messages += len(t)
 
     def write_event(self, topic: str, t: float, record: dict) -> None:
@@ -185,7 +212,7 @@ class McapRecorder:
         if self._batch:
             batch, messages = self._batch, self._batch_messages
             self._batch, self._batch_messages = [], 0
-            self._post(("batch", batch), messages)
+            self._post(("batch", batch, self._ring.produced), messages)
 
     def close(self, timeout_s: float = 120.0) -> None:
         """Tell the logger process to finish the MCAP file and wait for it, at most timeout_s."""

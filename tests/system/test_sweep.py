@@ -21,11 +21,12 @@ pytestmark = pytest.mark.network
 SPEEDS = [200.0 + 100.0 * i / 11 for i in range(12)]
 
 
-def sweep_file(tmp_path, name="speeds", grid=None, extra=""):
+def sweep_file(tmp_path, name="speeds", grid=None, extra="", sweep_extra=""):
     grid = grid or '"run.speed_kmh" = { start = 200.0, stop = 300.0, num = 12 }'
     path = tmp_path / f"{name}.toml"
     path.write_text(f"""[sweep]
 name = "{name}"
+{sweep_extra}
 case = "{ROOT / 'models' / 'data' / 'cases' / 'asm_250.toml'}"
 [set]
 "hil.relaxation" = 0.25
@@ -121,8 +122,10 @@ def _start_cluster(port):
 @pytest.mark.slow
 def test_an_interrupted_sweep_redoes_only_the_missing_points(tmp_path):
     # the interrupt comes while points are still to run: once 3 are done, the workers (and the runs
-    # they started) are frozen with SIGSTOP, so no machine is fast enough to finish the sweep first
-    path, out, port = sweep_file(tmp_path), tmp_path / "sweep", free_port()
+    # they started) are frozen with SIGSTOP. The points run through their FMUs (a second or more each, where a
+    # compiled in-process point takes tens of ms), so that the other nine are not all done before the
+    # 0.1 s poll sees the third
+    path, out, port = sweep_file(tmp_path, sweep_extra='engine = "fmu"'), tmp_path / "sweep", free_port()
     sched, worker = _start_cluster(port)
     try:
         cmd = [sys.executable, "-m", "pantohil.orchestrator.cli", "sweep", str(path), "--scheduler",

@@ -124,3 +124,6 @@ def test_a_group_schema_is_a_ros2_message_definition_with_its_fields_in_order():
     assert rows == [b"\x00\x01\x00\x00" + np.array([0.5, 1.0, -2.0], "<f8").tobytes()]
     with pytest.raises(ValueError, match="not 3 little-endian CDR doubles"):
         decode_row(["t", "a", "b"], rows[0][:-1])
+    for name in ("mean_N", "two__bars", "end_", "1st"):
+        with pytest.raises(ValueError, match="not a ROS 2 field name"):
+            group_schema("/x", {name: "[-]"})
