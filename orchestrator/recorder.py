@@ -77,7 +77,7 @@ class McapWriter:
 
 
 PIPE_BYTES = 1 << 20  # a span's message fits: handing it over never blocks the stepping loop
-RING_BYTES = 32 << 20  # spans of samples waiting for the writer (about 150 spans of the default case)
+RING_BYTES = 16 << 20  # spans of samples waiting for the writer (about 150 spans of the default case)
 WRITE_FAILED = 75  # exit code of a writer process whose file could not be written
 POLL_S = 0.25  # how often a writer waiting for the next message looks whether its parent is still there
 
