@@ -84,8 +84,13 @@ def event_schema(topic: str) -> bytes:
 
 
 def schema_name(topic: str) -> str:
-    """The schema name of a topic (the topic without its slashes)."""
+    """The schema name of a per-span topic (the topic without its slashes)."""
     return topic.strip("/")
+
+
+def group_schema_name(topic: str) -> str:
+    """The ROS 2 type name of a per-step group's messages: "/pantograph_2" -> "pantohil/msg/Pantograph2"."""
+    return "pantohil/msg/" + "".join(part.capitalize() for part in re.split(r"[/_]", topic) if part)
 
 
 class RowEncoder:

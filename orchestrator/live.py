@@ -19,7 +19,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .channels import (EVENT_SCHEMAS, GROUP_MESSAGE_ENCODING, GROUP_SCHEMA_ENCODING, RowEncoder, encode_event,
-                       event_schema, group_schema, schema_name, span_force_record)
+                       event_schema, group_schema, group_schema_name, schema_name, span_force_record)
 
 LIVE_RATE_HZ = 100.0     # per-step channels, in simulated time (the log keeps every step)
 POLL_S = 0.1             # wall time between two wakes of the publisher thread (each wake takes the GIL
@@ -89,10 +89,11 @@ class LivePublisher:
         self._server = foxglove.start_server(name=name, host=endpoint[0], port=endpoint[1], context=self._context,
                                              server_listener=self._viewers, message_backlog_size=BACKLOG_MESSAGES)
         self.host, self.port = endpoint[0], self._server.port
-        self._channels = {topic: self._channel(foxglove, topic, GROUP_SCHEMA_ENCODING, group_schema(topic, fields),
-                                               GROUP_MESSAGE_ENCODING) for topic, fields in groups.items()}
-        self._channels.update({topic: self._channel(foxglove, topic, "jsonschema", event_schema(topic), "json")
-                               for topic in EVENT_SCHEMAS})
+        self._channels = {topic: self._channel(foxglove, topic, group_schema_name(topic), GROUP_SCHEMA_ENCODING,
+                                               group_schema(topic, fields), GROUP_MESSAGE_ENCODING)
+                          for topic, fields in groups.items()}
+        self._channels.update({topic: self._channel(foxglove, topic, schema_name(topic), "jsonschema",
+                                                    event_schema(topic), "json") for topic in EVENT_SCHEMAS})
         self._encoders = {topic: RowEncoder(fields) for topic, fields in groups.items()}
         self.dt_s = dt_s
         self.decimation = max(1, int(round(1.0 / (LIVE_RATE_HZ * dt_s))))
@@ -104,9 +105,8 @@ class LivePublisher:
         self._thread = threading.Thread(target=self._loop, name="pantohil-live", daemon=True)
         self._thread.start()
 
-    def _channel(self, foxglove, topic: str, schema_encoding: str, schema: bytes, message_encoding: str):
-        return foxglove.Channel(topic, schema=foxglove.Schema(name=schema_name(topic), encoding=schema_encoding,
-                                                              data=schema),
+    def _channel(self, foxglove, topic: str, name: str, schema_encoding: str, schema: bytes, message_encoding: str):
+        return foxglove.Channel(topic, schema=foxglove.Schema(name=name, encoding=schema_encoding, data=schema),
                                 message_encoding=message_encoding, context=self._context)
 
     @property

@@ -2,14 +2,17 @@
 
 The per-step messages of a span are fixed-size rows, so their Message records, their message index and their
 chunk are built as numpy arrays in one pass, not one call per message; the messages given between two flushes
-(a span of every group, and its per-span records) make one chunk. Every other record (header, schema, channel,
-metadata, statistics, chunk index, summary offsets, footer) is written by the `mcap` library's record classes;
-a chunk's head (its fixed fields before its records) is packed here, so that its records are not copied. A
-reader of the growing file sees whole records up to its last one, and a file cut short keeps every chunk
-before the cut. Chunks carry the CRC of their records, the footer the summary's CRC.
+(a span of every group, interleaved step by step, and its per-span records) make one chunk. Every other record
+(header, schema, channel, metadata, statistics, chunk index, summary offsets, footer) is written by the `mcap`
+library's record classes; a chunk's head (its fixed fields before its records) is packed here, so that its
+records are not copied. A reader of the growing file sees whole records up to its last one, and a file cut
+short keeps every chunk before the cut; a failed write cuts the file back to its last whole record and ends
+the writing. Chunks carry the CRC of their records, the footer the summary's CRC.
 """
 from __future__ import annotations
 
+import contextlib
+import os
 import struct
 import zlib
 from pathlib import Path
@@ -71,12 +74,38 @@ def chunk_head(first_ns: int, last_ns: int, size: int, crc: int) -> bytes:
     return bytes([Opcode.CHUNK]) + (len(fixed) + len(tail) + size).to_bytes(8, "little") + fixed + tail
 
 
+def _bytes(part):
+    """A record array's bytes as a flat uint8 view (bytes as they are)."""
+    return part if isinstance(part, bytes) else np.ascontiguousarray(part).reshape(-1).view(np.uint8)
+
+
+def _interleaved(pending: list) -> list:
+    """The gathered (channel, log times, records) as pieces to write in order, each (records, [(channel, log
+    times, offsets of its messages in the piece)]): the groups logged for the same steps (equal log times) are
+    interleaved step by step, so that the chunk's messages are in time order; the others (a span's records, at
+    its end) follow."""
+    lone = [(r, [(ch, ns, np.arange(len(r)) * r.itemsize)]) for ch, ns, r in pending]
+    steps = next((ns for _, ns, _ in pending if len(ns) > 1), None)
+    same = [i for i, (_, ns, _) in enumerate(pending) if steps is not None and len(ns) == len(steps)
+            and np.array_equal(ns, steps)]
+    if len(same) < 2:
+        return lone
+    dtype = np.dtype([(f"m{j}", pending[i][2].dtype) for j, i in enumerate(same)])
+    combined = np.empty(len(steps), dtype=dtype)
+    for j, i in enumerate(same):
+        combined[f"m{j}"] = pending[i][2]
+    at = np.arange(len(steps)) * dtype.itemsize
+    members = [(pending[i][0], pending[i][1], at + dtype.fields[f"m{j}"][1]) for j, i in enumerate(same)]
+    return [(combined, members)] + [lone[i] for i in range(len(pending)) if i not in same]
+
+
 class McapFile:
     """Appends records to a new MCAP file: `schema`, `channel`, `metadata`, `messages` (fixed-size rows of one
     channel, as many chunks as CHUNK_BYTES asks), `flush`, then `close` (data end, summary, footer)."""
 
     def __init__(self, path: Path, library: str = "pantohil"):
-        self._fh = open(path, "wb")  # noqa: SIM115 (closed by close())
+        self._fh = open(path, "wb", buffering=0)  # noqa: SIM115 (closed by close()); no buffer to retry a failure
+        self._broken = False  # a write failed: the file ends with its last complete record, and nothing is added
         self._schemas: list[Schema] = []
         self._channels: list[Channel] = []
         self._chunk_indexes: list[ChunkIndex] = []
@@ -88,9 +117,22 @@ class McapFile:
         self._closed = False
         self._append(MAGIC + _serialised(Header(profile="", library=library)))
 
-    def _append(self, data: bytes) -> int:
+    def _append(self, *parts) -> int:
+        """Write `parts` (bytes or arrays) after the last record; their offset. A failed write cuts the file back
+        to that offset, so that it ends with whole records, and marks it broken: nothing more is written."""
+        if self._broken:
+            raise OSError(f"{self._fh.name}: an earlier write failed")
         offset = self._fh.tell()
-        self._fh.write(data)
+        try:
+            for part in parts:
+                view = memoryview(_bytes(part))
+                while view:  # a raw file may take part of a write
+                    view = view[self._fh.write(view):]
+        except OSError:
+            self._broken = True
+            with contextlib.suppress(OSError):
+                os.ftruncate(self._fh.fileno(), offset)
+            raise
         return offset
 
     def schema(self, name: str, encoding: str, data: bytes) -> int:
@@ -133,17 +175,19 @@ class McapFile:
         """Write the gathered messages as one chunk and a message index per channel after it."""
         if not self._pending:
             return
+        pieces = _interleaved(self._pending)
         size, crc = 0, 0
-        for _, _, records in self._pending:  # the records are written from the arrays, not copied into bytes
-            size, crc = size + records.nbytes, zlib.crc32(records, crc)
+        for records, _ in pieces:  # the records are written from the arrays, not copied into bytes
+            size, crc = size + records.nbytes, zlib.crc32(_bytes(records), crc)
         first = min(int(ns.min()) for _, ns, _ in self._pending)
         last = max(int(ns.max()) for _, ns, _ in self._pending)
         head = chunk_head(first, last, size, crc)
         offset = self._fh.tell()
         indexes, index_offsets, at = [], {}, 0
         parts: dict[int, list] = {}
-        for channel, ns, records in self._pending:
-            parts.setdefault(channel, []).append((ns, at + np.arange(len(records)) * records.itemsize))
+        for records, members in pieces:
+            for channel, ns, offsets in members:
+                parts.setdefault(channel, []).append((ns, at + offsets))
             at += records.nbytes
         for channel, mine in parts.items():
             times, offsets = np.concatenate([m[0] for m in mine]), np.concatenate([m[1] for m in mine])
@@ -152,23 +196,18 @@ class McapFile:
                 times, offsets = times[order], offsets[order]
             index_offsets[channel] = offset + len(head) + size + sum(len(i) for i in indexes)
             indexes.append(message_index(channel, times, offsets))
-        self._fh.write(head)
-        for _, _, records in self._pending:
-            self._fh.write(records)
-        self._fh.write(b"".join(indexes))
+        self._pending, self._pending_bytes = [], 0
+        self._append(head, *(records for records, _ in pieces), b"".join(indexes))
         self._chunk_indexes.append(ChunkIndex(
             message_start_time=first, message_end_time=last, chunk_start_offset=offset,
             chunk_length=len(head) + size, message_index_offsets=index_offsets,
             message_index_length=sum(len(i) for i in indexes), compression=COMPRESSION, compressed_size=size,
             uncompressed_size=size))
         self._times = [min([first, *self._times[:1]]), max([last, *self._times[1:]])]
-        self._pending, self._pending_bytes = [], 0
 
     def flush(self) -> None:
-        """Write the gathered messages as a chunk and hand the file's bytes to the OS (a reader of the growing
-        file sees them)."""
+        """Write the gathered messages as a chunk (a reader of the growing file sees it: nothing is buffered)."""
         self._write_chunk()
-        self._fh.flush()
 
     def _summary(self, start: int) -> tuple[bytes, bytes]:
         """The summary section starting at byte `start` and its summary offsets."""
@@ -196,6 +235,8 @@ class McapFile:
             return
         self._closed = True
         try:
+            if self._broken:
+                return
             self._write_chunk()
             self._append(_serialised(DataEnd(data_section_crc=0)))
             start = self._fh.tell()
@@ -203,6 +244,5 @@ class McapFile:
             footer = Footer(summary_start=start, summary_offset_start=start + len(summary), summary_crc=0)
             footer.summary_crc = zlib.crc32(summary + offsets + _serialised(footer)[:-4])  # up to the CRC field
             self._append(summary + offsets + _serialised(footer) + MAGIC)
-            self._fh.flush()
         finally:
             self._fh.close()

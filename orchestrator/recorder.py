@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .channels import (EVENT_SCHEMAS, GROUP_MESSAGE_ENCODING, GROUP_SCHEMA_ENCODING, RowEncoder, encode_event,
-                       event_schema, group_schema, schema_name)
+                       event_schema, group_schema, group_schema_name, schema_name)
 from .mcap_file import CHUNK_BYTES, McapFile
 from .pacing import background_priority
 from .shared_ring import RingClosed, SharedRing
@@ -38,7 +38,7 @@ class McapWriter:
         self._channels = {}
         self._encoders = {}
         for topic, fields in groups.items():
-            schema = self._file.schema(schema_name(topic), GROUP_SCHEMA_ENCODING, group_schema(topic, fields))
+            schema = self._file.schema(group_schema_name(topic), GROUP_SCHEMA_ENCODING, group_schema(topic, fields))
             self._channels[topic] = self._file.channel(topic, schema, GROUP_MESSAGE_ENCODING)
             self._encoders[topic] = RowEncoder(fields)
         for topic in EVENT_SCHEMAS:
@@ -172,6 +172,7 @@ class McapRecorder:
         self.messages = 0
         self._batch: list[tuple] = []
         self._batch_messages = 0
+        self._handed_over = 0  # the ring's count at the last flush
         self._closed = False
 
     def _post(self, msg: tuple, messages: int) -> None:
@@ -191,6 +192,8 @@ class McapRecorder:
         (waiting while the writer has not freed the room), or in the message if it is larger than the ring."""
         t, columns = np.asarray(t, dtype=float), np.asarray(columns, dtype=float)
         if self._ring.fits(t) and self._ring.fits(columns):
+            if not self._ring.unsent_room(self._handed_over, (t, columns)):
+                self.flush()  # the writer frees only what it has been told of
             try:
                 self._batch.append(("shared", topic, *self._ring.put(t, self._proc.is_alive),
                                     *self._ring.put(columns, self._proc.is_alive)))
@@ -211,7 +214,7 @@ class McapRecorder:
         file): one hand-over per span, however many groups it logs."""
         if self._batch:
             batch, messages = self._batch, self._batch_messages
-            self._batch, self._batch_messages = [], 0
+            self._batch, self._batch_messages, self._handed_over = [], 0, self._ring.produced
             self._post(("batch", batch, self._ring.produced), messages)
 
     def close(self, timeout_s: float = 120.0) -> None:

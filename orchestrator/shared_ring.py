@@ -2,7 +2,9 @@
 copies a block in (`put`) and sends only where it lies; the writer reads it in place (`get`) and, once it has
 taken what it needs, marks everything up to a position consumed (`consume`), which frees the room for the run.
 
-One producer, one consumer, blocks consumed in the order they were put. The memory is an anonymous shared
+One producer, one consumer, blocks consumed in the order they were put. The producer hands over what it put
+before the blocks it has not handed over could fill the ring (`unsent_room`), else it would wait for room
+that only the consumer, which has not heard of them, can free. The memory is an anonymous shared
 mapping made before the writer is forked; its first 8 bytes count the bytes consumed, written by the writer
 only. A block that does not fit before the end of the ring starts again at its beginning.
 """
@@ -33,8 +35,9 @@ class SharedRing:
         self.produced = 0  # bytes put so far (the producer's count), block padding included
 
     def fits(self, array: np.ndarray) -> bool:
-        """Whether a block of this array's size can ever be put (else it goes another way)."""
-        return np.asarray(array).size * 8 <= self.size // 2
+        """Whether a block of this array's size goes through the ring (at most an eighth of it; else it goes
+        another way), so that the producer's blocks not yet handed over never need the whole ring."""
+        return np.asarray(array).size * 8 <= self.size // 8
 
     def put(self, array: np.ndarray, alive: Callable[[], bool]) -> tuple[int, tuple[int, ...]]:
         """Copy a float64 array into the ring, waiting while the consumer has not freed the room (RingClosed
@@ -51,6 +54,12 @@ class SharedRing:
         self._data[start:start + block.nbytes] = block.reshape(-1).view(np.uint8)
         self.produced += block.nbytes
         return start, block.shape
+
+    def unsent_room(self, handed_over: int, arrays) -> bool:
+        """Whether `arrays` can be put after the blocks put since the producer's count `handed_over` without those
+        blocks (with the worst padding) filling the ring."""
+        need = sum(np.asarray(a).size * 8 for a in arrays)
+        return self.produced - handed_over + 2 * need <= self.size
 
     def get(self, offset: int, shape: tuple[int, ...]) -> np.ndarray:
         """The block put at `offset` with `shape`, read in place (valid until `consume` passes it)."""

@@ -41,6 +41,9 @@ def test_mcap_log_has_every_signal_group(default_run):
     assert counts["/convergence"] == summary["spans"]
     _, _, msg = read_log(default_run / "run.mcap", ("/pantograph",))[0]
     assert set(msg) == {"t", "contact_force", "head_height"}
+    with open(default_run / "run.mcap", "rb") as fh:  # the mcap library's indexed reader, CRCs checked
+        times = [m.log_time for _, _, m in make_reader(fh, validate_crcs=True).iter_messages(log_time_order=False)]
+    assert len(times) == stats.statistics.message_count and times == sorted(times)
 
 
 @pytest.mark.slow

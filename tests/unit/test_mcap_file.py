@@ -2,6 +2,7 @@
 library's readers make of it, record by record, and what pantohil's follower decodes."""
 from __future__ import annotations
 
+import errno
 import io
 import math
 import struct
@@ -9,6 +10,7 @@ import zlib
 
 import numpy as np
 import pytest
+from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
 from mcap.records import Chunk, Message, MessageIndex, Statistics
 from mcap.stream_reader import StreamReader
@@ -92,6 +94,10 @@ def test_every_record_is_whole_and_every_message_index_points_at_its_message(tmp
                 indexed += 1
             j += 1
     assert indexed == 2 * STEPS + 4
+    in_file = [r.log_time for r in StreamReader(io.BytesIO(path.read_bytes())).records if isinstance(r, Message)]
+    assert len(in_file) == 2 * STEPS + 4
+    if chunk_bytes == CHUNK_BYTES:  # a span's groups interleaved step by step (split chunks overlap in time)
+        assert in_file == sorted(in_file)
     record_bytes = STEPS * ((31 + 4 + 8 * 3) + (31 + 4 + 8 * 2))  # a Message record: 31 bytes and its message's
     assert chunks == 4 if chunk_bytes == CHUNK_BYTES else chunks >= record_bytes // chunk_bytes > 4
     assert isinstance(next(r for r in records if isinstance(r, Statistics)), Statistics)
@@ -127,3 +133,43 @@ def test_a_group_schema_is_a_ros2_message_definition_with_its_fields_in_order():
     for name in ("mean_N", "two__bars", "end_", "1st"):
         with pytest.raises(ValueError, match="not a ROS 2 field name"):
             group_schema("/x", {name: "[-]"})
+
+
+class _FailingFile:
+    """A file whose writes fail (ENOSPC) once `room` bytes are written, the last write only partly done."""
+
+    def __init__(self, fh, room: int):
+        self._fh, self.room = fh, room
+
+    def write(self, view):
+        if len(view) > self.room:
+            self._fh.write(view[:self.room])
+            self.room = 0
+            raise OSError(errno.ENOSPC, "No space left on device")
+        self.room -= len(view)
+        return self._fh.write(view)
+
+    def __getattr__(self, name):
+        return getattr(self._fh, name)
+
+
+def test_a_failed_write_leaves_the_file_at_its_last_whole_record_and_adds_nothing(tmp_path):
+    path = tmp_path / "run.mcap"
+    writer = McapWriter(path, GROUPS, {"case": "full disk"})
+    t = np.arange(936) * 1e-3
+    for topic, fields in GROUPS.items():
+        writer.write_block(topic, t, np.ones((936, len(fields))))
+    writer.flush()
+    whole = path.stat().st_size
+    writer._file._fh = _FailingFile(writer._file._fh, room=1000)  # the next chunk fails in its records
+    for topic, fields in GROUPS.items():
+        writer.write_block(topic, t + 1, np.ones((936, len(fields))))
+    with pytest.raises(OSError):
+        writer.flush()
+    writer.close()  # nothing more: no summary after a cut chunk
+    assert path.stat().st_size == whole
+    messages = 0
+    with pytest.raises(EndOfFile):  # every record whole up to the end of the file, which has no footer
+        for record in StreamReader(io.BytesIO(path.read_bytes()), validate_crcs=True).records:
+            messages += isinstance(record, Message)
+    assert messages == 2 * 936

@@ -56,4 +56,33 @@ def test_a_full_ring_waits_for_the_consumer_and_stops_once_it_is_gone():
     assert offset == 0 and len(looks) == 3
     with pytest.raises(RingClosed):
         ring.put(block, lambda: False)
-    assert not ring.fits(np.ones(RING // 8)) and ring.fits(block)
+    assert ring.fits(np.ones(RING // 64)) and not ring.fits(np.ones(RING // 64 + 1))  # an eighth of the ring
+
+
+def test_a_span_larger_than_the_ring_is_handed_over_in_parts(tmp_path, monkeypatch):
+    """A span's blocks that need more than the whole ring: the recorder hands over what it put before the ring
+    could fill with blocks the writer has not heard of (else it would wait for ever), and the log holds every
+    row, in order."""
+    import threading
+
+    from pantohil.orchestrator import recorder
+    from pantohil.orchestrator.mcap_follow import read_log
+
+    monkeypatch.setattr(recorder, "RING_BYTES", 1 << 16)
+    path, rows, blocks = tmp_path / "run.mcap", 500, 40  # 12 kB a block, 480 kB a span, a 64 KiB ring
+    values = np.random.default_rng(5).normal(size=(3 * blocks * rows, 2))
+    log = recorder.McapRecorder(path, {"/g": {"a": "[-]", "b": "[-]"}})
+
+    def spans():
+        for k in range(0, len(values), rows):
+            log.write_block("/g", np.arange(k, k + rows) * 1e-3, values[k:k + rows])
+            if (k // rows + 1) % blocks == 0:
+                log.flush()
+        log.close()
+
+    worker = threading.Thread(target=spans, daemon=True)
+    worker.start()
+    worker.join(120)
+    assert not worker.is_alive(), "the recorder waited for room in the ring that nothing frees"
+    got = np.array([[m["a"], m["b"]] for _, _, m in read_log(path, ("/g",))])
+    assert np.array_equal(got, values)
