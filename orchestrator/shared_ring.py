@@ -15,13 +15,14 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+from pantohil.models.errors import PantohilError
 
 _HEAD = 8  # bytes consumed so far (uint64), written by the consumer
 WAIT_S = 0.0005  # between two looks at the consumer's count while the ring is full
 
 
-class RingClosed(Exception):
-    """The consumer stopped while the producer waited for room."""
+class RingClosed(PantohilError, RuntimeError):
+    """The consumer stopped while the producer waited for room (the recorder reports its writer's error)."""
 
 
 class SharedRing:
