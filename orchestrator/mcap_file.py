@@ -28,6 +28,7 @@ CHUNK_BYTES = 1 << 20  # records per chunk at most (a span of the default case's
 COMPRESSION = ""  # a step's doubles compress by about a fifth, for twice the writer's time: chunks stay plain
 _RECORD_HEAD = 9  # opcode (1 byte) and content length (uint64)
 _CHUNK_FIXED = struct.Struct("<QQQII")  # message start and end time, uncompressed size and CRC, compression's length
+_INDEX_HEAD = struct.Struct("<BQHI")  # MessageIndex: opcode, length, channel, its pairs' byte length
 _MESSAGE_HEAD = np.dtype([("opcode", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
                           ("log_time", "<u8"), ("publish_time", "<u8")])  # packed: 31 bytes
 
@@ -61,8 +62,7 @@ def message_index(channel: int, log_time_ns: np.ndarray, offsets: np.ndarray) ->
     pairs = np.empty((len(log_time_ns), 2), dtype="<u8")
     pairs[:, 0], pairs[:, 1] = log_time_ns, offsets
     body = pairs.tobytes()
-    return (np.array([int(Opcode.MESSAGE_INDEX)], "u1").tobytes() + np.array([2 + 4 + len(body)], "<u8").tobytes()
-            + np.array([channel], "<u2").tobytes() + np.array([len(body)], "<u4").tobytes() + body)
+    return _INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 2 + 4 + len(body), channel, len(body)) + body
 
 
 def chunk_head(first_ns: int, last_ns: int, size: int, crc: int) -> bytes:
@@ -111,7 +111,6 @@ class McapFile:
         self._chunk_indexes: list[ChunkIndex] = []
         self._metadata_indexes: list[MetadataIndex] = []
         self._counts: dict[int, int] = {}
-        self._times: list[int] = []  # first and last log time
         self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []  # (channel, log times, records) of the chunk
         self._pending_bytes = 0
         self._closed = False
@@ -203,7 +202,6 @@ class McapFile:
             chunk_length=len(head) + size, message_index_offsets=index_offsets,
             message_index_length=sum(len(i) for i in indexes), compression=COMPRESSION, compressed_size=size,
             uncompressed_size=size))
-        self._times = [min([first, *self._times[:1]]), max([last, *self._times[1:]])]
 
     def flush(self) -> None:
         """Write the gathered messages as a chunk (a reader of the growing file sees it: nothing is buffered)."""
@@ -216,8 +214,8 @@ class McapFile:
                       message_count=sum(self._counts.values()), schema_count=len(self._schemas),
                       channel_count=len(self._channels), attachment_count=0,
                       metadata_count=len(self._metadata_indexes), chunk_count=len(self._chunk_indexes),
-                      message_start_time=self._times[0] if self._times else 0,
-                      message_end_time=self._times[1] if self._times else 0,
+                      message_start_time=min((c.message_start_time for c in self._chunk_indexes), default=0),
+                      message_end_time=max((c.message_end_time for c in self._chunk_indexes), default=0),
                       channel_message_counts=dict(self._counts))]),
                   (Opcode.CHUNK_INDEX, self._chunk_indexes), (Opcode.METADATA_INDEX, self._metadata_indexes)]
         body, offsets = b"", []

@@ -3,7 +3,8 @@ messages of the records that are complete in the file, and remembers where the n
 
 The framing of MCAP records (opcode: 1 byte, length: uint64 little-endian, then the content) tells
 where a complete record ends; the records themselves (chunks, schemas, channels, messages) are read
-by the mcap library. pantohil's writer appends each record whole; a writer that writes a chunk with
+by the mcap library. pantohil's writer appends a chunk's head, records and indexes in turn, with its final
+length in the head (a reader waits for the rest); a writer that writes a chunk with
 placeholders (length and sizes all ones) and then patches its length and its header field by field (the
 mcap crate's, foxglove-sdk's) can leave a chunk whose length is final but whose compressed size does not yet
 agree with it at the end of what is in the file: it is not complete yet.

@@ -66,7 +66,7 @@ class McapWriter:
         self.messages += 1
 
     def flush(self) -> None:
-        """Hand the file's bytes to the OS, so that a reader of the growing file sees whole records."""
+        """Write what was logged since the last flush as a chunk, so that a reader of the growing file sees it."""
         self._file.flush()
 
     def close(self) -> None:
