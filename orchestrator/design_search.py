@@ -39,6 +39,9 @@ INFEASIBLE_RESIDUAL_N = 1e3  # per sample: far above any feasible design's devia
 # max and min of a sampled force are not smooth in the design.)
 EXTREME_PENALTY = 10.0
 EXTREME_MARGIN_N = 0.1
+# the compass search's merit: the objective plus this many N per N beyond a bound (an exact penalty: a design
+# beyond a bound ranks after one within it unless it lowers the std by ten times its excess)
+POLISH_PENALTY = 10.0
 
 
 def evaluate_on_worker(raw: dict, points: list[SpeedPoint], min_dropper_length_m: float) -> dict:
@@ -159,6 +162,14 @@ def cost(result: dict, points: list[SpeedPoint], extremes: Extremes) -> float:
     return float(np.sum(residuals(result, points, extremes) ** 2))
 
 
+def merit(result: dict, extremes: Extremes = Extremes()) -> float:
+    """What the compass search minimises [N]: the objective plus POLISH_PENALTY times how far the max and min go
+    beyond their bounds; inf for a design that cannot be built."""
+    if not result["feasible"]:
+        return np.inf
+    return float(result["objective_N"] + POLISH_PENALTY * np.sum(extremes.excess_N(result)))
+
+
 def search(evaluator: Evaluator, x0: np.ndarray, bounds: list[tuple[float, float]], step: float,
            extremes: Extremes = Extremes(), relative_tolerance: float = 1e-3) -> str:
     """Bounded least squares from x0 until the cost changes by less than `relative_tolerance` or the budget is
@@ -177,26 +188,32 @@ def search(evaluator: Evaluator, x0: np.ndarray, bounds: list[tuple[float, float
         r0, *rs = (residuals(r, points, extremes) for r in evaluator.results([x, *trial]))
         return np.column_stack([(r - r0) / h for r, h in zip(rs, steps, strict=True)])
 
+    x0 = np.clip(x0, lo, hi)
+    # a step shorter than the finite-difference step is below what the Jacobian resolves: the descent stops there
+    # (along a bound's penalty it would otherwise creep on in steps of millimetres)
+    xtol = max(1e-4, step / max(float(np.linalg.norm(x0)), step))
     try:
-        out = least_squares(fun, np.clip(x0, lo, hi), jac=jac, bounds=(lo, hi), method="trf", x_scale=10 * step,
-                            ftol=relative_tolerance, xtol=1e-4, gtol=1e-8)
+        out = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale=10 * step,
+                            ftol=relative_tolerance, xtol=xtol, gtol=1e-8)
     except BudgetSpent:
         return BUDGET_SPENT
     return out.message
 
 
 def polish(evaluator: Evaluator, x0: np.ndarray, bounds: list[tuple[float, float]], step: float, smallest: float,
-           extremes: Extremes = Extremes()) -> str:
-    """A compass search from x0 over the designs within the extremes' bounds: each poll evaluates x +- h along
-    every variable in one parallel batch and moves to the best design that lowers the objective, or halves h;
-    it ends when h falls below `smallest` or the budget is spent. It follows a bound the descent's penalty
-    cannot (the max and min of a sampled force jump as the design moves), and its first steps are long enough
-    to leave a local minimum the descent ended in."""
+           extremes: Extremes = Extremes(), visited: list | None = None) -> str:
+    """A compass search from x0 on the merit (`merit`: the objective, a design beyond the extremes' bounds charged
+    POLISH_PENALTY N per N of excess): each poll evaluates x +- h along every variable in one parallel batch and
+    moves to the design of least merit if that is lower, or halves h; it ends when h falls below `smallest` or the
+    budget is spent. It follows a bound the descent's smooth penalty cannot (the max and min of a sampled force
+    jump as the design moves), from a start just beyond it too, and its first steps are long enough to leave a
+    local minimum the descent ended in. Appends the designs it moves through to `visited`."""
+    visited = [] if visited is None else visited
     lo, hi = (np.array(b, dtype=float) for b in zip(*bounds, strict=True))
     x = np.asarray(x0, dtype=float)
-    fx = evaluator.results([x])[0]
-    fx = fx["objective_N"] if extremes.hold(fx) else np.inf
+    fx = merit(evaluator.results([x])[0], extremes)
     h = step
+    visited.append(x)
     try:
         while h >= smallest:
             trial = []
@@ -206,10 +223,11 @@ def polish(evaluator: Evaluator, x0: np.ndarray, bounds: list[tuple[float, float
                     t[i] = np.clip(t[i] + sign * h, lo[i], hi[i])
                     if not np.allclose(t, x) and not any(np.allclose(t, u) for u in trial):
                         trial.append(t)
-            scored = [(r["objective_N"], i) for i, r in enumerate(evaluator.results(trial)) if extremes.hold(r)]
+            scored = [(merit(r, extremes), i) for i, r in enumerate(evaluator.results(trial))]
             if scored and min(scored)[0] < fx:
                 fx, i = min(scored)
                 x = trial[i]
+                visited.append(x)
             else:
                 h /= 2
     except BudgetSpent:
@@ -239,6 +257,15 @@ def starts(evaluator: Evaluator, count: int, extremes: Extremes = Extremes()) ->
         if not any(np.allclose(r["x"], x) for x in out):
             out.append(np.array(r["x"]))
     return out
+
+
+def least_merit(evaluator: Evaluator, extremes: Extremes = Extremes(), away_from: list[np.ndarray] = (),
+                distance: float = 0.0) -> np.ndarray | None:
+    """The evaluated design of least `merit` at least `distance` (Euclidean, in the variables' units) from every
+    design of `away_from` (a compass search's start); None if there is none that can be built."""
+    rows = [r for r in evaluator.cache.values() if r["result"]["feasible"]
+            and all(np.linalg.norm(np.asarray(r["x"]) - np.asarray(a)) >= distance for a in away_from)]
+    return np.array(min(rows, key=lambda r: merit(r["result"], extremes))["x"]) if rows else None
 
 
 def best(evaluator: Evaluator, extremes: Extremes = Extremes()) -> dict | None:

@@ -21,15 +21,26 @@ from pantohil.models.progress import progress as progress_bar
 from pantohil.models.storage import write_text_atomic
 
 from .dask_engine import dask_client, tune_worker_allocator, worker_count
-from .design_search import (BUDGET_SPENT, JOURNAL, Evaluator, Extremes, best, design_key, explore, polish, search,
-                            starts)
+from .design_search import (BUDGET_SPENT, JOURNAL, Evaluator, Extremes, best, design_key, explore, least_merit,
+                            polish, search, starts)
 from .optimise import STEP, OptimiseRequest, case_overrides, open_folder, prepare, written_case
 from .optimise_report import FIGURE, plot_report, write_history
 from .report import write_json_atomic
 
 CATENARY_OUT = "optimised_catenary.toml"
 CASE_OUT = "optimised_case.toml"
+DESCENT_TIME_SPENT = "the descents' share of the time was spent"
+COARSE_TIME_SPENT = "the coarse compass searches' share of the time was spent"
 POLISH_STEPS = 10  # the compass search's first step, in finite-difference steps (0.5 m for positions, 10 mm heights)
+# the descents' share of the time left after the first sample: the compass search after them has the rest, so that it
+# runs within --max-minutes (a descent along a bound can take the whole time in steps of a few mm)
+DESCENT_SHARE = 0.4
+# then compass searches from several starts (COARSE_SHARE of the time left), each down to COARSE_STEPS
+# finite-difference steps, each next start RESTART_STEPS from every design an earlier one passed through (1 m, 20 mm),
+# and a last one from the best design down to half a step
+COARSE_SHARE = 0.8
+COARSE_STEPS = 2.5
+RESTART_STEPS = 20
 
 
 def _toml(data: dict) -> str:
@@ -80,16 +91,48 @@ def _search(request: OptimiseRequest, problem, out: Path, client, progress: bool
                              key="catenary")
         extremes = Extremes.of(nominal, request.extremes == "nominal")
         explore(evaluator, problem.bounds, request.explore)
-        why = []
-        for x in starts(evaluator, request.starts, extremes):
-            why.append(search(evaluator, x, problem.bounds, STEP[request.vary], extremes).rstrip("."))
-            if why[-1] == BUDGET_SPENT:
-                break
-        top = best(evaluator, extremes)
-        if why[-1] != BUDGET_SPENT and top is not None:
-            why.append(polish(evaluator, np.array(top["x"]), problem.bounds, POLISH_STEPS * STEP[request.vary],
-                              STEP[request.vary] / 2, extremes))
+        why = _descend(evaluator, request, problem, extremes, deadline)
+        if why[-1] != BUDGET_SPENT:
+            why += _compass(evaluator, request, problem, extremes, deadline)
         return evaluator, extremes, "; ".join(dict.fromkeys(why))
+
+
+def _descend(evaluator: Evaluator, request: OptimiseRequest, problem, extremes: Extremes, deadline: float) -> list[str]:
+    """The Gauss-Newton descents from the best designs so far (`--starts`), within DESCENT_SHARE of the time left;
+    why each stopped."""
+    evaluator.deadline = time.monotonic() + DESCENT_SHARE * max(0.0, deadline - time.monotonic())
+    why = []
+    for x in starts(evaluator, request.starts, extremes):
+        why.append(search(evaluator, x, problem.bounds, STEP[request.vary], extremes).rstrip("."))
+        if why[-1] == BUDGET_SPENT:
+            why[-1] = DESCENT_TIME_SPENT if len(evaluator.cache) < request.max_designs else BUDGET_SPENT
+            break
+    evaluator.deadline = deadline
+    return why
+
+
+def _compass(evaluator: Evaluator, request: OptimiseRequest, problem, extremes: Extremes, deadline: float) -> list[str]:
+    """Compass searches down to COARSE_STEPS finite-difference steps, each from the design of least merit away from
+    every design an earlier one passed through, within COARSE_SHARE of the time left (the objective has several
+    minima: a search from the next start can find a lower one); then one from the best down to half a step. Why
+    each stopped."""
+    step = STEP[request.vary]
+    evaluator.deadline = time.monotonic() + COARSE_SHARE * max(0.0, deadline - time.monotonic())
+    visited: list[np.ndarray] = []
+    why = []
+    start = least_merit(evaluator, extremes)
+    while start is not None:
+        why.append(polish(evaluator, start, problem.bounds, POLISH_STEPS * step, COARSE_STEPS * step, extremes,
+                          visited))
+        if why[-1] == BUDGET_SPENT:
+            why[-1] = COARSE_TIME_SPENT if len(evaluator.cache) < request.max_designs else BUDGET_SPENT
+            break
+        start = least_merit(evaluator, extremes, visited, RESTART_STEPS * step)
+    evaluator.deadline = deadline
+    if len(evaluator.cache) >= request.max_designs or time.monotonic() >= deadline:
+        return [*why, BUDGET_SPENT]
+    return [*why, polish(evaluator, least_merit(evaluator, extremes), problem.bounds, COARSE_STEPS * step, step / 2,
+                         extremes)]
 
 
 def run_optimise(request: OptimiseRequest, out: Path, scheduler: str | None = None, workers: int | None = None,
