@@ -5,6 +5,7 @@ last)."""
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import asdict
 from functools import partial
 from pathlib import Path
@@ -97,17 +98,31 @@ def _search(request: OptimiseRequest, problem, out: Path, client, progress: bool
         return evaluator, extremes, "; ".join(dict.fromkeys(why))
 
 
+@contextmanager
+def _share_of_time(evaluator: Evaluator, share: float, deadline: float):
+    """Within the block, the evaluator sends no new design after `share` of the time left until `deadline`."""
+    evaluator.deadline = time.monotonic() + share * max(0.0, deadline - time.monotonic())
+    try:
+        yield
+    finally:
+        evaluator.deadline = deadline
+
+
+def _stopped(evaluator: Evaluator, share_spent: str) -> str:
+    """Why a phase with a share of the time stopped: its share was spent, or the budget of designs was."""
+    return share_spent if len(evaluator.cache) < evaluator.max_designs else BUDGET_SPENT
+
+
 def _descend(evaluator: Evaluator, request: OptimiseRequest, problem, extremes: Extremes, deadline: float) -> list[str]:
     """The Gauss-Newton descents from the best designs so far (`--starts`), within DESCENT_SHARE of the time left;
     why each stopped."""
-    evaluator.deadline = time.monotonic() + DESCENT_SHARE * max(0.0, deadline - time.monotonic())
     why = []
-    for x in starts(evaluator, request.starts, extremes):
-        why.append(search(evaluator, x, problem.bounds, STEP[request.vary], extremes).rstrip("."))
-        if why[-1] == BUDGET_SPENT:
-            why[-1] = DESCENT_TIME_SPENT if len(evaluator.cache) < request.max_designs else BUDGET_SPENT
-            break
-    evaluator.deadline = deadline
+    with _share_of_time(evaluator, DESCENT_SHARE, deadline):
+        for x in starts(evaluator, request.starts, extremes):
+            why.append(search(evaluator, x, problem.bounds, STEP[request.vary], extremes).rstrip("."))
+            if why[-1] == BUDGET_SPENT:
+                why[-1] = _stopped(evaluator, DESCENT_TIME_SPENT)
+                break
     return why
 
 
@@ -117,19 +132,18 @@ def _compass(evaluator: Evaluator, request: OptimiseRequest, problem, extremes: 
     minima: a search from the next start can find a lower one); then one from the best down to half a step. Why
     each stopped."""
     step = STEP[request.vary]
-    evaluator.deadline = time.monotonic() + COARSE_SHARE * max(0.0, deadline - time.monotonic())
     visited: list[np.ndarray] = []
     why = []
-    start = least_merit(evaluator, extremes)
-    while start is not None:
-        why.append(polish(evaluator, start, problem.bounds, POLISH_STEPS * step, COARSE_STEPS * step, extremes,
-                          visited))
-        if why[-1] == BUDGET_SPENT:
-            why[-1] = COARSE_TIME_SPENT if len(evaluator.cache) < request.max_designs else BUDGET_SPENT
-            break
-        start = least_merit(evaluator, extremes, visited, RESTART_STEPS * step)
-    evaluator.deadline = deadline
-    if len(evaluator.cache) >= request.max_designs or time.monotonic() >= deadline:
+    with _share_of_time(evaluator, COARSE_SHARE, deadline):
+        start = least_merit(evaluator, extremes)
+        while start is not None:
+            why.append(polish(evaluator, start, problem.bounds, POLISH_STEPS * step, COARSE_STEPS * step, extremes,
+                              visited))
+            if why[-1] == BUDGET_SPENT:
+                why[-1] = _stopped(evaluator, COARSE_TIME_SPENT)
+                break
+            start = least_merit(evaluator, extremes, visited, RESTART_STEPS * step)
+    if len(evaluator.cache) >= evaluator.max_designs or time.monotonic() >= deadline:
         return [*why, BUDGET_SPENT]
     return [*why, polish(evaluator, least_merit(evaluator, extremes), problem.bounds, COARSE_STEPS * step, step / 2,
                          extremes)]
